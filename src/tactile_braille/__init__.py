@@ -1,0 +1,8 @@
+"""tactile_braille: a benchmark for reinforcement learning from touch.
+
+Layers (each imports only those above it): ``keyboard`` (the braille keyboard
+as data and physics), ``sensor`` (the simulated TacTip and the shared image
+processing), ``rigs`` (anything that taps: virtual or real).
+"""
+
+__version__ = "0.1.0"
