@@ -15,7 +15,7 @@ the camera sees the pin pattern change. The model, step by step:
    where the skin slopes, the tip moves sideways by ``-pin_length * grad(w)``
    (pins splay away from each bump, so braille dots show as local rosettes),
    and the inward push moves it towards the axis by ``w * sin(theta)``.
-4. **Camera.** Pins are drawn as anti-aliased ellipses (foreshortened on the
+4. **Camera.** Pins are drawn as ellipses, blurred by the lens, (foreshortened on the
    dome's flanks) by an orthographic camera on the dome's axis, over a dark
    background, with seedable lighting gain and pixel noise.
 
@@ -35,7 +35,7 @@ from tactile_braille.keyboard.surface import KeyboardSurface
 from tactile_braille.sensor.config import TacTipConfig
 from tactile_braille.sensor.processing import process_frame
 
-_ELLIPSE_VERTICES = 12
+_ELLIPSE_VERTICES = 8
 _SUBPIXEL_BITS = 4
 _NOISE_BANK_MARGIN_PX = 64
 
@@ -185,11 +185,25 @@ class TacTip:
         return np.clip(level, 0, 255).astype(np.uint8)
 
     @cached_property
+    def _dome_box_px(self) -> tuple[int, int, int, int]:
+        config = self.config
+        width, height = config.camera_px
+        cx, cy = config.image_centre_px
+        reach = config.image_radius_px * 1.08
+        return (
+            max(int(cx - reach), 0),
+            max(int(cy - reach), 0),
+            min(int(cx + reach) + 1, width),
+            min(int(cy + reach) + 1, height),
+        )
+
+    @cached_property
     def _noise_bank(self) -> np.ndarray:
         width, height = self.config.camera_px
         bank_rng = np.random.default_rng(0x7AC71B)
         shape = (height + _NOISE_BANK_MARGIN_PX, width + _NOISE_BANK_MARGIN_PX)
-        return bank_rng.standard_normal(shape).astype(np.float32)
+        noise = self.config.nuisance.pixel_noise_std * bank_rng.standard_normal(shape)
+        return np.rint(noise).astype(np.int16)
 
     def render_frame(
         self,
@@ -223,8 +237,7 @@ class TacTip:
             height, width = frame.shape
             dy, dx = rng.integers(0, _NOISE_BANK_MARGIN_PX, size=2)
             noise = self._noise_bank[dy : dy + height, dx : dx + width]
-            frame = cv2.scaleAdd(noise, nuisance.pixel_noise_std, frame.astype(np.float32))
-            frame = cv2.convertScaleAbs(frame)
+            frame = cv2.add(frame, noise, dtype=cv2.CV_8U)
         return frame
 
     def _draw_pins(self, frame: np.ndarray, positions_mm: np.ndarray, gain: float) -> None:
@@ -248,7 +261,11 @@ class TacTip:
         )
         polygons = np.rint(vertices * (1 << _SUBPIXEL_BITS)).astype(np.int32)
         level = int(min(config.pin_level * gain, 255))
-        cv2.fillPoly(frame, polygons, level, lineType=cv2.LINE_AA, shift=_SUBPIXEL_BITS)
+        cv2.fillPoly(frame, polygons, level, lineType=cv2.LINE_8, shift=_SUBPIXEL_BITS)
+        # The lens's blur, over the dome's bounding box only (the rest is flat).
+        x0, y0, x1, y1 = self._dome_box_px
+        roi = frame[y0:y1, x0:x1]
+        cv2.GaussianBlur(roi, (5, 5), 1.0, dst=roi)
 
     def observe(
         self,
