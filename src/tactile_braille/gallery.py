@@ -76,5 +76,8 @@ def save_gallery(
     with tempfile.NamedTemporaryFile(dir=output.parent, suffix=".png", delete=False) as handle:
         fig.savefig(handle, format="png", dpi=110)
     plt.close(fig)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(handle.name, 0o666 & ~umask)  # a temporary file is created private
     os.replace(handle.name, output)
     return output

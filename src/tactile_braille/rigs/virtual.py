@@ -7,7 +7,7 @@ import numpy as np
 from tactile_braille.keyboard.layout import KeyboardLayout
 from tactile_braille.keyboard.surface import KeyboardSurface
 from tactile_braille.keyboard.switch import SwitchModel
-from tactile_braille.rigs.base import Pose, TactileSample, Workspace
+from tactile_braille.rigs.base import Pose, RigError, TactileSample, Workspace
 from tactile_braille.sensor.config import TacTipConfig, sensor_preset
 from tactile_braille.sensor.tactip import TacTip
 
@@ -98,7 +98,7 @@ class VirtualRig:
 
     def _check(self, pose: Pose) -> None:
         if self._closed:
-            raise RuntimeError("the rig is closed")
+            raise RigError("the rig is closed")
         self.workspace.check(pose)
 
     def __enter__(self) -> VirtualRig:
