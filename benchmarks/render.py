@@ -24,33 +24,39 @@ from tactile_braille.rigs.virtual import VirtualRig
 from tactile_braille.sensor.processing import process_frame
 
 
+def measure(sensor: str, taps: int) -> tuple[float, float]:
+    """Seconds spent rendering and processing ``taps`` random taps."""
+    rig = VirtualRig(sensor=sensor, seed=0)
+    rng = np.random.default_rng(1)
+    centres = np.array([rig.layout.centre_mm(k) for k in ALPHABET_KEYS])
+    poses = centres[rng.integers(len(centres), size=taps)] + rng.uniform(-3, 3, (taps, 2))
+    depths = rng.uniform(3.5, 8.0, taps)
+    rig.tap(*poses[0], depths[0])  # build the rasters and caches outside the timing
+    render_s = process_s = 0.0
+    for (x, y), depth in zip(poses, depths, strict=True):
+        start = time.perf_counter()
+        frame = rig.tap(x, y, depth).frame
+        middle = time.perf_counter()
+        process_frame(frame, rig.sensor.config.processing)
+        render_s += middle - start
+        process_s += time.perf_counter() - middle
+    return render_s, process_s
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--taps", type=int, default=2000)
     args = parser.parse_args()
     cv2.setNumThreads(1)
-    rig = VirtualRig(seed=0)
-    rng = np.random.default_rng(1)
-    centres = np.array([rig.layout.centre_mm(k) for k in ALPHABET_KEYS])
-    poses = centres[rng.integers(len(centres), size=args.taps)] + rng.uniform(-3, 3, (args.taps, 2))
-    depths = rng.uniform(3.5, 8.0, args.taps)
-    rig.tap(*poses[0], depths[0])  # build the rasters and caches outside the timing
-
-    start = time.perf_counter()
-    frames = [rig.tap(x, y, d).frame for (x, y), d in zip(poses, depths, strict=True)]
-    render_s = time.perf_counter() - start
-    start = time.perf_counter()
-    for frame in frames:
-        process_frame(frame)
-    process_s = time.perf_counter() - start
-
     n = args.taps
-    print(f"taps: {n} on one core (OpenCV threads: {cv2.getNumThreads()})")
-    print(f"render (switch + contact + pins + 640x480 frame): {n / render_s:8.0f} frames/s")
-    print(f"process (crop, area resize, adaptive threshold):  {n / process_s:8.0f} frames/s")
-    total = n / (render_s + process_s)
-    print(f"rendered-and-processed observations:            {total:8.0f} obs/s (target >= 1000)")
-    print(f"share of time in processing: {process_s / (render_s + process_s):.1%}")
+    print(f"taps: {n} per sensor on one core (OpenCV threads: {cv2.getNumThreads()})")
+    print(f"{'sensor':12s} {'render/s':>9s} {'process/s':>10s} {'obs/s':>7s} {'processing share':>17s}")
+    for sensor in ("braille_331", "tactip_127"):
+        render_s, process_s = measure(sensor, n)
+        total = n / (render_s + process_s)
+        share = process_s / (render_s + process_s)
+        print(f"{sensor:12s} {n / render_s:9.0f} {n / process_s:10.0f} {total:7.0f} {share:17.1%}")
+    print("target: >= 1000 rendered-and-processed observations per second (braille_331)")
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ from tactile_braille.keyboard.surface import KeyboardSurface
 from tactile_braille.sensor.config import TacTipConfig
 from tactile_braille.sensor.processing import process_frame
 
-_ELLIPSE_VERTICES = 8
+_ELLIPSE_VERTICES = 6
 _SUBPIXEL_BITS = 4
 _NOISE_BANK_MARGIN_PX = 64
 
@@ -101,7 +101,7 @@ class TacTip:
     def _pin_grid_index(self) -> tuple[np.ndarray, np.ndarray]:
         centre = (self.grid_px - 1) / 2
         cells = np.rint(self.pin_rest_mm / self.grid_spacing_mm + centre).astype(int)
-        cells = np.clip(cells, 0, self.grid_px - 1)
+        cells = np.clip(cells, 1, self.grid_px - 2)
         return cells[:, 0], cells[:, 1]
 
     @cached_property
@@ -159,16 +159,25 @@ class TacTip:
         config = self.config
         sigma_px = config.skin_smoothing_mm / self.grid_spacing_mm
         skin = cv2.GaussianBlur(indentation_mm, (0, 0), sigma_px, borderType=cv2.BORDER_CONSTANT)
-        slope_x, slope_y = np.gradient(skin, self.grid_spacing_mm)
         rows, cols = self._pin_grid_index
-        positions, theta = self._pin_layout
-        radial = np.hypot(positions[:, 0], positions[:, 1])
-        towards_axis = -np.divide(
-            positions, radial[:, None], out=np.zeros_like(positions), where=radial[:, None] > 0
+        # Central differences of the skin at the pins (the grid has a margin
+        # of one cell around every pin).
+        step = 2 * self.grid_spacing_mm
+        slope = np.stack(
+            [skin[rows + 1, cols] - skin[rows - 1, cols], skin[rows, cols + 1] - skin[rows, cols - 1]],
+            axis=-1,
         )
-        lift = skin[rows, cols] * np.sin(theta)
-        tilt = -config.pin_length_mm * np.stack([slope_x[rows, cols], slope_y[rows, cols]], axis=-1)
-        return tilt + lift[:, None] * towards_axis
+        tilt = (-config.pin_length_mm / step) * slope
+        towards_axis, sin_theta = self._pin_inward
+        return tilt + (skin[rows, cols] * sin_theta)[:, None] * towards_axis
+
+    @cached_property
+    def _pin_inward(self) -> tuple[np.ndarray, np.ndarray]:
+        """Unit vectors from each pin towards the axis, and each pin's sin(theta)."""
+        positions, theta = self._pin_layout
+        radial = np.hypot(positions[:, 0], positions[:, 1])[:, None]
+        towards_axis = -np.divide(positions, radial, out=np.zeros_like(positions), where=radial > 0)
+        return towards_axis, np.sin(theta)
 
     # -------------------------------------------------------------- camera
     @cached_property
@@ -240,32 +249,39 @@ class TacTip:
             frame = cv2.add(frame, noise, dtype=cv2.CV_8U)
         return frame
 
+    @cached_property
+    def _pin_outline_px(self) -> np.ndarray:
+        """(n_pins, vertices, 2) outline of each pin's marker around its centre.
+
+        Markers are ellipses foreshortened along the dome's radial direction
+        by ``cos(theta)``; pins move little, so the rest orientation is used.
+        """
+        config = self.config
+        positions, theta = self._pin_layout
+        # Image column runs along -y, image row along x.
+        radial = np.stack([-positions[:, 1], positions[:, 0]], axis=-1)
+        norm = np.linalg.norm(radial, axis=-1, keepdims=True)
+        radial = np.divide(radial, norm, out=np.tile([1.0, 0.0], (len(radial), 1)), where=norm > 0)
+        tangential = np.stack([-radial[:, 1], radial[:, 0]], axis=-1)
+        radius_px = config.marker_radius_mm * config.px_per_mm
+        cos_a, sin_a = self._ellipse_unit
+        return (radius_px * np.cos(theta))[:, None, None] * radial[:, None, :] * cos_a[
+            None, :, None
+        ] + radius_px * tangential[:, None, :] * sin_a[None, :, None]
+
     def _draw_pins(self, frame: np.ndarray, positions_mm: np.ndarray, gain: float) -> None:
         config = self.config
         scale = config.px_per_mm
         cx, cy = config.image_centre_px
-        _, theta = self._pin_layout
-        # Image column runs along -y, image row along x.
         centres = np.stack([cx - scale * positions_mm[:, 1], cy + scale * positions_mm[:, 0]], axis=-1)
-        radial = np.stack([-positions_mm[:, 1], positions_mm[:, 0]], axis=-1)
-        norm = np.linalg.norm(radial, axis=-1, keepdims=True)
-        radial = np.divide(radial, norm, out=np.tile([1.0, 0.0], (len(radial), 1)), where=norm > 0)
-        tangential = np.stack([-radial[:, 1], radial[:, 0]], axis=-1)
-        radius_px = config.marker_radius_mm * scale
-        cos_a, sin_a = self._ellipse_unit
-        radial_extent = (radius_px * np.cos(theta))[:, None, None] * radial[:, None, :]
-        vertices = (
-            centres[:, None, :]
-            + radial_extent * cos_a[None, :, None]
-            + radius_px * tangential[:, None, :] * sin_a[None, :, None]
-        )
+        vertices = centres[:, None, :] + self._pin_outline_px
         polygons = np.rint(vertices * (1 << _SUBPIXEL_BITS)).astype(np.int32)
         level = int(min(config.pin_level * gain, 255))
         cv2.fillPoly(frame, polygons, level, lineType=cv2.LINE_8, shift=_SUBPIXEL_BITS)
         # The lens's blur, over the dome's bounding box only (the rest is flat).
         x0, y0, x1, y1 = self._dome_box_px
         roi = frame[y0:y1, x0:x1]
-        cv2.GaussianBlur(roi, (5, 5), 1.0, dst=roi)
+        cv2.GaussianBlur(roi, (5, 5), 1.4, dst=roi)
 
     def observe(
         self,
