@@ -20,6 +20,7 @@ import numpy as np
 
 from tactile_braille.keyboard.layout import ALL_TASK_KEYS
 from tactile_braille.rigs.virtual import VirtualRig
+from tactile_braille.sensor.config import sensor_preset
 from tactile_braille.sensor.processing import process_frame
 
 TAP_DEPTH_MM = 5.0
@@ -44,11 +45,17 @@ def main() -> None:
     parser.add_argument("--train", type=int, default=100)
     parser.add_argument("--val", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--sensor", default="braille_331", help="sensor preset")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", help="override a numeric sensor field"
+    )
     args = parser.parse_args()
+    overrides = {field: float(value) for field, value in (item.split("=", 1) for item in args.set)}
+    sensor = sensor_preset(args.sensor, **overrides)
     rng = np.random.default_rng(args.seed)
     start = time.perf_counter()
-    train_x, train_y = collect(VirtualRig(seed=args.seed), args.train, rng)
-    val_x, val_y = collect(VirtualRig(seed=args.seed + 1), args.val, rng)
+    train_x, train_y = collect(VirtualRig(sensor, seed=args.seed), args.train, rng)
+    val_x, val_y = collect(VirtualRig(sensor, seed=args.seed + 1), args.val, rng)
     print(f"rendered {len(train_x) + len(val_x)} taps in {time.perf_counter() - start:.1f} s")
 
     # 1-NN on binary images: squared distance = |a| + |b| - 2 a.b
