@@ -15,10 +15,14 @@ cleanly and resume.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
+
+from tactile_braille.keyboard.layout import KeyboardLayout
+from tactile_braille.sensor.config import ImageProcessing
 
 
 class RigError(RuntimeError):
@@ -95,6 +99,8 @@ class Rig(Protocol):
 
     workspace: Workspace
     clearance_mm: float
+    layout: KeyboardLayout
+    processing: ImageProcessing
 
     def tap(self, x_mm: float, y_mm: float, depth_mm: float, yaw_deg: float = 0.0) -> TactileSample:
         """Move above (x, y) at a safe height, tap down to ``depth_mm``, grab a
@@ -108,6 +114,19 @@ class Rig(Protocol):
     @property
     def pose(self) -> Pose:
         """The sensor's current pose."""
+        ...
+
+    def reseed(self, seed: int | Sequence[int]) -> None:
+        """Make the rig's own randomness reproducible from here on.
+
+        Collections reseed before every tap so that tap ``i`` does not depend
+        on what came before it (and survives a resume). A hardware rig, whose
+        noise cannot be seeded, ignores it.
+        """
+        ...
+
+    def describe(self) -> dict:
+        """JSON-able description: ``rig`` name, ``keyboard`` and ``sensor`` parameters."""
         ...
 
     def close(self) -> None:

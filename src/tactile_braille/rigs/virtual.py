@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
+
 import numpy as np
 
 from tactile_braille.keyboard.layout import KeyboardLayout
@@ -51,6 +54,7 @@ class VirtualRig:
         self.surface = KeyboardSurface(self.layout)
         self.sensor = TacTip(config)
         self.clearance_mm = self.switch.clearance_mm
+        self.processing = config.processing
         x_min, x_max, y_min, y_max = self.layout.bounds_mm
         self.workspace = workspace or Workspace(x_mm=(x_min, x_max), y_mm=(y_min, y_max))
         self._rng = None if seed is None else np.random.default_rng(seed)
@@ -91,6 +95,19 @@ class VirtualRig:
         )
         self._pose = Pose(pose.x_mm, pose.y_mm, 0.0, pose.yaw_deg)
         return TactileSample(frame=frame, pose=pose, pressed_key=pressed_key)
+
+    def reseed(self, seed: int | Sequence[int]) -> None:
+        """Restart the nuisance generator from ``seed`` (no effect on a noiseless rig)."""
+        if self._rng is not None:
+            self._rng = np.random.default_rng(seed)
+
+    def describe(self) -> dict:
+        """The rig's name and the parameters of its keyboard and sensor."""
+        return {
+            "rig": "virtual",
+            "keyboard": {"pitch_mm": self.layout.pitch_mm, "switch": dataclasses.asdict(self.switch)},
+            "sensor": dataclasses.asdict(self.sensor.config),
+        }
 
     def close(self) -> None:
         """Nothing to release; further commands raise."""

@@ -1,0 +1,74 @@
+"""Default datasets, generated on first use into a cache directory and reused after.
+
+The cache lives in ``$TACTILE_BRAILLE_DATA``, or else
+``$XDG_CACHE_HOME/tactile_braille`` (``~/.cache/tactile_braille``). A cached
+file made by another generator version, or for another keyboard or sensor, is
+stale: it is regenerated (with a message), never silently reused.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from tactile_braille.datasets.collect import GENERATOR_VERSION, collect, dataset_metadata
+from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps, Procedure
+from tactile_braille.datasets.store import DatasetError, TactileDataset, load_dataset
+from tactile_braille.rigs.virtual import VirtualRig
+
+DEFAULT_DATASETS: dict[str, Procedure] = {
+    "keys-train": PerturbedTaps(keys="all", per_key=100, split="train"),
+    "keys-validation": PerturbedTaps(keys="all", per_key=50, split="validation"),
+    "grid-alphabet": GridTaps(keys="alphabet"),
+    "grid-arrows": GridTaps(keys="arrows"),
+}
+"""The paper's data, by name: perturbed taps on the 31 keys + NONE (100 train,
+50 validation per class) and the two dense grids of the continuous tasks."""
+
+
+def data_dir() -> Path:
+    """The cache directory (created on demand)."""
+    configured = os.environ.get("TACTILE_BRAILLE_DATA")
+    if configured:
+        return Path(configured).expanduser()
+    cache_home = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(cache_home) / "tactile_braille"
+
+
+def default_dataset_path(name: str, sensor: str = "braille_331", seed: int = 0) -> Path:
+    """Where the default dataset ``name`` is cached."""
+    if name not in DEFAULT_DATASETS:
+        raise ValueError(f"unknown default dataset {name!r}; choose one of {sorted(DEFAULT_DATASETS)}")
+    return data_dir() / f"{name}__{sensor}__seed{seed}.h5"
+
+
+def default_dataset(
+    name: str, sensor: str = "braille_331", seed: int = 0, progress: bool = True
+) -> TactileDataset:
+    """Load the default dataset ``name``, generating it on the virtual rig if needed.
+
+    Generation is deterministic from ``seed``; an interrupted generation is
+    resumed on the next call.
+    """
+    path = default_dataset_path(name, sensor, seed)
+    procedure = DEFAULT_DATASETS[name]
+    rig = VirtualRig(sensor=sensor)
+    expected = dataset_metadata(rig, procedure, seed)
+    if path.exists():
+        try:
+            dataset = load_dataset(path)
+            if dataset.metadata == expected:
+                return dataset
+            reason = (
+                f"generator version {dataset.metadata.generator_version} != {GENERATOR_VERSION}"
+                if dataset.metadata.generator_version != GENERATOR_VERSION
+                else "different procedure, keyboard or sensor parameters"
+            )
+        except DatasetError as error:
+            reason = str(error)
+        print(f"tactile_braille: regenerating stale cached dataset {path} ({reason})", file=sys.stderr)
+        path.unlink()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    collect(rig, procedure, path, seed=seed, resume=True, progress=progress)
+    return load_dataset(path)
