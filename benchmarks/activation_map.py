@@ -13,7 +13,6 @@ taps for each map.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import matplotlib
 
@@ -21,38 +20,15 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from tactile_braille.gallery import draw_activation_map, save_figure
 from tactile_braille.keyboard.calibration import (
     MAP_NAMES,
+    RIG_TAP_OFFSET_MM,
     agreement,
     load_activation_map,
     predict_activation_map,
 )
 from tactile_braille.keyboard.layout import NONE_KEY, key_set
-
-
-def plot_maps(name: str, observed: np.ndarray, predicted: np.ndarray, activation_map, axes_row_pairs) -> None:
-    keys = [NONE_KEY, *key_set(name)]
-    code = {key: i for i, key in enumerate(keys)}
-    xs, ys = np.unique(activation_map.x_mm), np.unique(activation_map.y_mm)
-    depths = np.unique(activation_map.depth_mm)
-    cmap = plt.get_cmap("tab20", len(keys))
-    for column, depth in enumerate(depths):
-        at_depth = activation_map.depth_mm == depth
-        for row, (labels, what) in enumerate(((observed, "robot"), (predicted, "model"))):
-            grid = np.full((len(xs), len(ys)), np.nan)
-            rows = np.searchsorted(xs, activation_map.x_mm[at_depth])
-            cols = np.searchsorted(ys, activation_map.y_mm[at_depth])
-            grid[rows, cols] = [code[k] for k in labels[at_depth]]
-            grid[grid == 0] = np.nan
-            ax = axes_row_pairs[row][column]
-            ax.axis("on")
-            ax.imshow(grid, cmap=cmap, vmin=0, vmax=len(keys) - 1, interpolation="nearest", aspect="auto")
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if row == 0:
-                ax.set_title(f"tap {depth - 2:g} mm", fontsize=7)
-            if column == 0:
-                ax.set_ylabel(f"{name}\n{what}", fontsize=7)
 
 
 def main() -> None:
@@ -76,13 +52,22 @@ def main() -> None:
             f"{name:8s} actuated-tap agreement {result.actuated:6.1%} "
             f"(never-press {never.actuated:5.1%}, target 85%)  [{result.taps} taps]"
         )
-        plot_maps(name, activation_map.pressed, predicted, activation_map, axes[2 * index : 2 * index + 2])
-    fig.suptitle("Activation maps: real robot (rows 1, 3) vs switch model (rows 2, 4); colour = key")
+        for row, (labels, what) in enumerate(((activation_map.pressed, "robot"), (predicted, "model"))):
+            draw_activation_map(
+                axes[2 * index + row],
+                activation_map.x_mm,
+                activation_map.y_mm,
+                activation_map.depth_mm - RIG_TAP_OFFSET_MM,
+                labels,
+                key_set(name),
+                f"{name}\n{what}",
+            )
+    fig.suptitle(
+        "Activation maps: real robot (rows 1, 3) vs switch model (rows 2, 4); colour = key; "
+        "depth = recorded tap depth"
+    )
     fig.tight_layout()
-    output = Path(args.output)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(output, dpi=110)
-    print(f"wrote {output}")
+    print(f"wrote {save_figure(fig, args.output)}")
 
 
 if __name__ == "__main__":

@@ -4,13 +4,23 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections.abc import Sequence
+from pathlib import Path
 
 from tactile_braille.sensor.config import PRESETS
 
 
 def _show(args: argparse.Namespace) -> int:
-    from tactile_braille.gallery import live_gallery_tiles, save_gallery
+    from tactile_braille.gallery import dataset_figure, live_gallery_tiles, save_figure, save_gallery
+
+    if args.dataset is not None:
+        from tactile_braille.datasets.store import load_dataset
+
+        dataset = load_dataset(args.dataset)
+        path = save_figure(dataset_figure(dataset), args.output)
+        print(f"wrote {path} ({len(dataset)} taps in {args.dataset})")
+        return 0
     from tactile_braille.rigs.virtual import VirtualRig
 
     rig = VirtualRig(sensor=args.sensor, seed=args.seed)
@@ -24,25 +34,108 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
+def _make_rig(args: argparse.Namespace):
+    if args.rig == "virtual":
+        from tactile_braille.rigs.virtual import VirtualRig
+
+        return VirtualRig(sensor=args.sensor)
+    raise SystemExit(f"unknown rig {args.rig!r}")  # argparse's choices make this unreachable
+
+
+def _collect(args: argparse.Namespace) -> int:
+    from tactile_braille.datasets.collect import collect
+    from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps
+
+    if args.procedure == "perturbed":
+        procedure = PerturbedTaps(keys=args.keys, per_key=args.per_key, split=args.split, seed=args.seed)
+    else:
+        keys = "alphabet" if args.keys == "all" else args.keys
+        procedure = GridTaps(keys=keys, spacing_mm=args.spacing_mm, depth_step_mm=args.depth_step_mm)
+    start = time.perf_counter()
+    with _make_rig(args) as rig:
+        path = collect(rig, procedure, args.output, seed=args.seed, resume=args.resume)
+    size_mb = path.stat().st_size / 1e6
+    print(f"wrote {path}: {len(procedure)} taps, {size_mb:.1f} MB, {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def _import(args: argparse.Namespace) -> int:
+    from tactile_braille.datasets.importer import import_original
+
+    path = import_original(
+        args.csv, args.output, videos_dir=args.videos, grid_frame=args.grid_frame, resume=args.resume
+    )
+    print(f"wrote {path}")
+    return 0
+
+
+def _data(args: argparse.Namespace) -> int:
+    from tactile_braille.datasets.cache import DEFAULT_DATASETS, default_dataset, default_dataset_path
+
+    for name in DEFAULT_DATASETS:
+        start = time.perf_counter()
+        dataset = default_dataset(name, sensor=args.sensor, seed=args.seed)
+        path = default_dataset_path(name, args.sensor, args.seed)
+        print(
+            f"{name:16s} {len(dataset):6d} taps {path.stat().st_size / 1e6:6.1f} MB "
+            f"{time.perf_counter() - start:6.1f} s  {path}"
+        )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tactile-braille``."""
     parser = argparse.ArgumentParser(
         prog="tactile-braille", description="Learning to type on a braille keyboard by touch."
     )
     commands = parser.add_subparsers(dest="command", required=True)
-    show = commands.add_parser("show", help="write a gallery PNG of tactile images")
+
+    show = commands.add_parser("show", help="write a gallery PNG of live renders or of a dataset")
+    show.add_argument("dataset", nargs="?", type=Path, help="a dataset file (default: live renders)")
     show.add_argument("--output", default="outputs/gallery.png", help="PNG to write")
     show.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
     show.add_argument("--depth", type=float, default=5.0, help="tap depth in mm (default 5)")
     show.add_argument("--seed", type=int, default=0, help="seed of the sensor nuisances")
     show.set_defaults(handler=_show)
+
+    collect = commands.add_parser("collect", help="run a collection procedure on a rig into a dataset")
+    collect.add_argument("--procedure", choices=("perturbed", "grid"), default="perturbed")
+    collect.add_argument("--keys", choices=("arrows", "alphabet", "all"), default="all")
+    collect.add_argument("--rig", choices=("virtual",), default="virtual")
+    collect.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
+    collect.add_argument("--output", type=Path, required=True, help="dataset file (.h5) to write")
+    collect.add_argument("--seed", type=int, default=0)
+    collect.add_argument("--resume", action="store_true", help="continue an interrupted collection")
+    collect.add_argument("--per-key", type=int, default=100, help="perturbed: taps per key")
+    collect.add_argument("--split", choices=("train", "validation"), default="train")
+    collect.add_argument("--spacing-mm", type=float, default=None, help="grid: x/y step (paper's)")
+    collect.add_argument("--depth-step-mm", type=float, default=None, help="grid: depth step (paper's)")
+    collect.set_defaults(handler=_collect)
+
+    importer = commands.add_parser("import", help="import the original release's csv + mp4 recordings")
+    importer.add_argument("csv", type=Path, help="targets_video.csv")
+    importer.add_argument("--output", type=Path, required=True)
+    importer.add_argument("--videos", type=Path, default=None, help="video folder (default: videos/)")
+    importer.add_argument("--grid-frame", choices=("alphabet", "arrows"), default=None)
+    importer.add_argument("--resume", action="store_true")
+    importer.set_defaults(handler=_import)
+
+    data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
+    data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
+    data.add_argument("--seed", type=int, default=0)
+    data.set_defaults(handler=_data)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``tactile-braille``."""
     args = build_parser().parse_args(argv)
-    return args.handler(args)
+    try:
+        return args.handler(args)
+    except (FileExistsError, FileNotFoundError, ValueError) as error:
+        # DatasetError is a ValueError: bad input gets its message, not a traceback.
+        print(f"tactile-braille: error: {error}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Gallery PNGs of tactile images: what the sensor sees over each key."""
+"""Gallery PNGs: what the sensor sees over each key, and what a dataset holds."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_braille.keyboard.layout import ALL_TASK_KEYS
+from tactile_braille.datasets.store import TactileDataset
+from tactile_braille.keyboard.layout import ALL_TASK_KEYS, NONE_KEY
 from tactile_braille.rigs.virtual import VirtualRig
 from tactile_braille.sensor.processing import process_frame
 
@@ -47,6 +48,92 @@ def live_gallery_tiles(
     return tiles
 
 
+def draw_activation_map(
+    axes,
+    x_mm: np.ndarray,
+    y_mm: np.ndarray,
+    depth_mm: np.ndarray,
+    pressed: np.ndarray,
+    keys: tuple[str, ...],
+    row_title: str,
+) -> None:
+    """Draw which key each tap of a grid actuated, one axis per depth.
+
+    Args:
+        axes: a sequence of matplotlib axes, at least one per distinct depth.
+        x_mm, y_mm, depth_mm: the taps (a regular grid in x and y).
+        pressed: key name per tap (``"NONE"`` is left blank).
+        keys: the keys to colour, in colour order.
+        row_title: label of the row.
+    """
+    import matplotlib.pyplot as plt
+
+    code = {key: i + 1 for i, key in enumerate(keys)}
+    xs, ys = np.unique(x_mm), np.unique(y_mm)
+    cmap = plt.get_cmap("tab20", len(keys) + 1)
+    for column, depth in enumerate(np.unique(depth_mm)):
+        at_depth = depth_mm == depth
+        grid = np.full((len(xs), len(ys)), np.nan)
+        rows = np.searchsorted(xs, x_mm[at_depth])
+        cols = np.searchsorted(ys, y_mm[at_depth])
+        grid[rows, cols] = [code.get(key, np.nan) for key in pressed[at_depth]]
+        ax = axes[column]
+        ax.axis("on")
+        # Columns run along -y so that the keyboard reads left to right.
+        ax.imshow(grid[:, ::-1], cmap=cmap, vmin=0, vmax=len(keys), interpolation="nearest", aspect="auto")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(f"depth {depth:g} mm", fontsize=7)
+        if column == 0:
+            ax.set_ylabel(row_title, fontsize=7)
+
+
+def save_figure(fig, output: str | Path) -> Path:
+    """Save a matplotlib figure as PNG atomically (temporary file, then rename)."""
+    import matplotlib.pyplot as plt
+
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile(dir=output.parent, suffix=".png", delete=False) as handle:
+        fig.savefig(handle, format="png", dpi=110)
+    plt.close(fig)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(handle.name, 0o666 & ~umask)  # a temporary file is created private
+    os.replace(handle.name, output)
+    return output
+
+
+def dataset_figure(dataset: TactileDataset, max_tiles: int = 32):
+    """A figure of a dataset: one image per label, and for grids the activation map at each depth."""
+    import matplotlib.pyplot as plt
+
+    labels = dataset.label_names()
+    shown = [name for name in dict.fromkeys(labels)][:max_tiles]
+    is_grid = dataset.metadata.procedure.get("procedure") == "grid"
+    depths = np.unique(dataset.poses[:, 2]) if is_grid else np.array([])
+    columns = max(8, len(depths))
+    tile_rows = -(-len(shown) // columns)
+    rows = tile_rows + (1 if is_grid else 0)
+    fig, axes = plt.subplots(rows, columns, figsize=(1.5 * columns, 1.7 * rows), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, name in zip(axes[:tile_rows].flat, shown, strict=False):
+        index = int(np.flatnonzero(labels == name)[0])
+        ax.imshow(dataset.observations[index], cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        ax.set_title(name, fontsize=7)
+    if is_grid:
+        pressed = dataset.pressed_names()
+        keys = tuple(k for k in dict.fromkeys(pressed) if k != NONE_KEY)
+        draw_activation_map(
+            axes[tile_rows], dataset.poses[:, 0], dataset.poses[:, 1], dataset.poses[:, 2], pressed, keys,
+            "pressed key",
+        )  # fmt: skip
+    fig.suptitle(f"{dataset.path.name}: {len(dataset)} taps ({dataset.metadata.procedure.get('procedure')})")
+    fig.tight_layout()
+    return fig
+
+
 def save_gallery(
     tiles: list[tuple[str, np.ndarray, np.ndarray]],
     output: str | Path,
@@ -71,13 +158,4 @@ def save_gallery(
         ax.set_title(name, fontsize=7)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    output = Path(output)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=output.parent, suffix=".png", delete=False) as handle:
-        fig.savefig(handle, format="png", dpi=110)
-    plt.close(fig)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(handle.name, 0o666 & ~umask)  # a temporary file is created private
-    os.replace(handle.name, output)
-    return output
+    return save_figure(fig, output)

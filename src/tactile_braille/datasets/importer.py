@@ -1,0 +1,145 @@
+"""Import the original release's recordings (``targets_video.csv`` + ``videos/video_N.mp4``).
+
+Each row of ``targets_video.csv`` names one tap's video. The original grabbed
+two frames per tap and kept the second, so frame 1 (counting from 0) of each
+video is the tactile image; it goes through the same :func:`process_frame` as
+rendered frames. Poses become the keyboard frame:
+
+* supervised data (``obj_lbl`` = key name) are already in it: the key centre
+  ``obj_pose`` plus the jitter ``pose_1`` (x), ``pose_2`` (y), ``pose_3``
+  (depth offset, in [-1, 0] mm) and ``pose_6`` (yaw);
+* grid data (with ``tap_depth`` and ``pressed_buttons``) are in a task's work
+  frame, placed on the keyboard by ``CALIBRATED_FRAMES``; the rig added 2 mm
+  to every ``tap_depth``.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tactile_braille.datasets.store import DatasetError, DatasetMetadata, DatasetWriter
+from tactile_braille.keyboard.calibration import CALIBRATED_FRAMES, RIG_TAP_OFFSET_MM
+from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout
+from tactile_braille.sensor.config import ImageProcessing
+from tactile_braille.sensor.processing import process_frame
+
+SUPERVISED_TAP_DEPTH_MM = 5.0
+"""Nominal depth assumed for supervised taps (the release does not record it)."""
+
+
+def read_video_frame(path: Path, frame_index: int = 1) -> np.ndarray:
+    """Frame ``frame_index`` of a video as a grey uint8 image."""
+    capture = cv2.VideoCapture(str(path))
+    try:
+        if not capture.isOpened():
+            raise DatasetError(f"cannot open video {path}")
+        frame = None
+        for _ in range(frame_index + 1):
+            ok, frame = capture.read()
+            if not ok:
+                raise DatasetError(f"video {path} has fewer than {frame_index + 1} frames")
+        return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+    finally:
+        capture.release()
+
+
+def _parse_pose(text: str, source: object) -> list[float]:
+    try:
+        values = [float(v) for v in text.strip().strip("[]").split(",")]
+    except ValueError:
+        raise DatasetError(f"{source}: malformed obj_pose {text!r}") from None
+    if len(values) != 6:
+        raise DatasetError(f"{source}: obj_pose {text!r} should have 6 values")
+    return values
+
+
+def import_original(
+    csv_path: str | Path,
+    output: str | Path,
+    videos_dir: str | Path | None = None,
+    grid_frame: str | None = None,
+    frame_index: int = 1,
+    processing: ImageProcessing | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Convert an original-format recording to a dataset file.
+
+    Args:
+        csv_path: the ``targets_video.csv``.
+        output: the dataset to write.
+        videos_dir: folder of the videos (default: ``videos/`` beside the csv).
+        grid_frame: for grid data, the task work frame (``"alphabet"`` or
+            ``"arrows"``); ``None`` for supervised data.
+        frame_index: which frame of each video to keep.
+        processing: image processing (the paper's by default).
+        resume: continue an interrupted import.
+
+    Raises:
+        DatasetError: a malformed csv, an unknown key, a missing or short video.
+    """
+    csv_path = Path(csv_path)
+    videos_dir = Path(videos_dir) if videos_dir is not None else csv_path.parent / "videos"
+    processing = processing or ImageProcessing()
+    if grid_frame is not None and grid_frame not in CALIBRATED_FRAMES:
+        raise ValueError(f"grid_frame must be one of {sorted(CALIBRATED_FRAMES)} or None, got {grid_frame!r}")
+    with open(csv_path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    required = {"sensor_video", "obj_lbl", "obj_pose"}
+    required |= {"tap_depth", "pressed_buttons"} if grid_frame else {"pose_1", "pose_2", "pose_3", "pose_6"}
+    if not rows or not required <= set(rows[0]):
+        raise DatasetError(f"{csv_path} lacks the columns {sorted(required)} of the original format")
+    layout = KeyboardLayout()
+    key_names = (*(key.name for key in layout.keys), NONE_KEY)
+    name_index = {name: i for i, name in enumerate(key_names)}
+    metadata = DatasetMetadata(
+        key_names=key_names,
+        procedure={
+            "procedure": "grid" if grid_frame else "perturbed",
+            "imported_from": csv_path.name,
+            "grid_frame": grid_frame,
+            "frame_index": frame_index,
+        },
+        keyboard={"source": "DREVO Excalibur 84 with 3D-printed braille keycaps (real)"},
+        sensor={"source": "TacTip, 331 pins (real)", "processing": dataclasses.asdict(processing)},
+        rig="original-release",
+        seed=0,
+        generator_version="original-release",
+    )
+    writer = DatasetWriter(output, metadata, len(rows), resume=resume)
+    pending = writer.pending()
+    if progress:
+        from tqdm.auto import tqdm
+
+        pending = tqdm(pending, desc=f"importing {csv_path.name}", unit="video")
+    try:
+        for index in pending:
+            row = rows[index]
+            source = f"{csv_path}, row {index + 2}"
+            x, y, _z, _, _, yaw = _parse_pose(row["obj_pose"], source)
+            if grid_frame:
+                frame = CALIBRATED_FRAMES[grid_frame]
+                x, y = frame.offset_x_mm + x, frame.offset_y_mm + y
+                depth = float(row["tap_depth"]) + RIG_TAP_OFFSET_MM
+                pressed = row["pressed_buttons"]
+                label = pressed
+                yaw = 0.0
+            else:
+                x += float(row["pose_1"])
+                y += float(row["pose_2"])
+                depth = SUPERVISED_TAP_DEPTH_MM + float(row["pose_3"])
+                yaw = float(row["pose_6"])
+                label, pressed = row["obj_lbl"], NONE_KEY
+            for key in (label, pressed):
+                if key not in name_index:
+                    raise DatasetError(f"{source}: unknown key {key!r}")
+            image = process_frame(read_video_frame(videos_dir / row["sensor_video"], frame_index), processing)
+            writer.add(index, image, (x, y, depth, yaw), name_index[label], name_index[pressed])
+    finally:
+        writer.flush()
+    return writer.finalize()
