@@ -17,7 +17,9 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
+	$(VENV)/bin/tactile-braille data
 	$(VENV)/bin/tactile-braille show --output $(OUT)/gallery.png
+	$(VENV)/bin/tactile-braille show grid-alphabet --output $(OUT)/grid-alphabet.png
 
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"
@@ -31,6 +33,8 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/activation_map.py
 	$(PY) benchmarks/render.py
+	$(PY) benchmarks/collect.py
+	$(PY) benchmarks/separability.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

@@ -15,9 +15,13 @@ def _show(args: argparse.Namespace) -> int:
     from tactile_braille.gallery import dataset_figure, live_gallery_tiles, save_figure, save_gallery
 
     if args.dataset is not None:
+        from tactile_braille.datasets.cache import DEFAULT_DATASETS, default_dataset
         from tactile_braille.datasets.store import load_dataset
 
-        dataset = load_dataset(args.dataset)
+        if not Path(args.dataset).exists() and args.dataset in DEFAULT_DATASETS:
+            dataset = default_dataset(args.dataset, sensor=args.sensor, seed=args.seed)
+        else:
+            dataset = load_dataset(args.dataset)
         path = save_figure(dataset_figure(dataset), args.output)
         print(f"wrote {path} ({len(dataset)} taps in {args.dataset})")
         return 0
@@ -91,7 +95,9 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True)
 
     show = commands.add_parser("show", help="write a gallery PNG of live renders or of a dataset")
-    show.add_argument("dataset", nargs="?", type=Path, help="a dataset file (default: live renders)")
+    show.add_argument(
+        "dataset", nargs="?", help="a dataset file or a default dataset's name (default: live renders)"
+    )
     show.add_argument("--output", default="outputs/gallery.png", help="PNG to write")
     show.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
     show.add_argument("--depth", type=float, default=5.0, help="tap depth in mm (default 5)")

@@ -130,7 +130,7 @@ def _write_arrays(
                 data = np.asarray(arrays[name], dtype=_DTYPES[name])
                 options = {}
                 if compress and len(data):
-                    chunk_rows = max(1, min(len(data), 256 if name == "observations" else 65536))
+                    chunk_rows = max(1, min(len(data), 32 if name == "observations" else 65536))
                     options = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
                     options["chunks"] = (chunk_rows, *data.shape[1:])
                 handle.create_dataset(name, data=data, **options)
