@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from tactile_braille._io import atomic_path
 from tactile_braille.datasets.store import TactileDataset
 from tactile_braille.keyboard.layout import ALL_TASK_KEYS, NONE_KEY
 from tactile_braille.rigs.virtual import VirtualRig
@@ -92,16 +91,12 @@ def save_figure(fig, output: str | Path) -> Path:
     """Save a matplotlib figure as PNG atomically (temporary file, then rename)."""
     import matplotlib.pyplot as plt
 
-    output = Path(output)
-    output.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=output.parent, suffix=".png", delete=False) as handle:
-        fig.savefig(handle, format="png", dpi=110)
-    plt.close(fig)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(handle.name, 0o666 & ~umask)  # a temporary file is created private
-    os.replace(handle.name, output)
-    return output
+    try:
+        with atomic_path(output) as temporary:
+            fig.savefig(temporary, format="png", dpi=110)
+    finally:
+        plt.close(fig)
+    return Path(output)
 
 
 def dataset_figure(dataset: TactileDataset, max_tiles: int = 32):

@@ -32,6 +32,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from tactile_braille._io import atomic_path
+
 FORMAT_NAME = "tactile_braille.dataset"
 FORMAT_VERSION = 1
 _ARRAYS = ("observations", "poses", "labels", "pressed", "tap_index")
@@ -121,26 +123,17 @@ def _write_arrays(
     path: Path, arrays: dict[str, np.ndarray], metadata: DatasetMetadata, compress: bool
 ) -> None:
     """Write a complete file to a temporary name, flush it to disk, rename it into place."""
-    temporary = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with h5py.File(temporary, "w") as handle:
-            handle.attrs.update(metadata.to_attrs())
-            handle.attrs["created_utc"] = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
-            for name in _ARRAYS:
-                data = np.asarray(arrays[name], dtype=_DTYPES[name])
-                options = {}
-                if compress and len(data):
-                    chunk_rows = max(1, min(len(data), 32 if name == "observations" else 65536))
-                    options = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
-                    options["chunks"] = (chunk_rows, *data.shape[1:])
-                handle.create_dataset(name, data=data, **options)
-            handle.flush()
-        with open(temporary, "rb") as raw:
-            os.fsync(raw.fileno())
-        os.replace(temporary, path)
-    finally:
-        if temporary.exists():
-            temporary.unlink()
+    with atomic_path(path, fsync=True) as temporary, h5py.File(temporary, "w") as handle:
+        handle.attrs.update(metadata.to_attrs())
+        handle.attrs["created_utc"] = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+        for name in _ARRAYS:
+            data = np.asarray(arrays[name], dtype=_DTYPES[name])
+            options = {}
+            if compress and len(data):
+                chunk_rows = max(1, min(len(data), 32 if name == "observations" else 65536))
+                options = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+                options["chunks"] = (chunk_rows, *data.shape[1:])
+            handle.create_dataset(name, data=data, **options)
 
 
 def _read_arrays(path: Path) -> tuple[DatasetMetadata, dict[str, np.ndarray]]:

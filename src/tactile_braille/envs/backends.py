@@ -1,0 +1,178 @@
+"""Where an environment's tactile images come from, for a batch of taps at once.
+
+* :class:`DatasetBackend`: the paper's simulation by sampling. Discrete tasks
+  return a random stored image of the key under the sensor (perturbed taps);
+  continuous tasks return the stored grid sample nearest to the pose, with the
+  key it actuated.
+* :class:`RigBackend`: taps a :class:`~tactile_braille.rigs.base.Rig` at the
+  exact pose: the live renderer (``VirtualRig``) or a real robot. Actuation is
+  decided by the rig (the switch model on the virtual rig).
+
+Keys are passed as *codes*: the index of the key in the keyboard layout, or
+``-1`` for none.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tactile_braille.datasets.store import DatasetError, TactileDataset, load_dataset
+from tactile_braille.envs.tasks import MOVE_TAP_DEPTH_MM, PRESS_DEPTH_MM, Task
+from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout
+from tactile_braille.rigs.base import Rig
+from tactile_braille.sensor.processing import process_frame
+
+
+def _codes_from_dataset(dataset: TactileDataset, layout: KeyboardLayout, values: np.ndarray) -> np.ndarray:
+    """Map a dataset's key indices to layout codes (-1 for NONE or unknown keys)."""
+    table = np.array([layout.key(n).index if n in layout else -1 for n in dataset.key_names], dtype=np.int64)
+    return table[values]
+
+
+class DatasetBackend:
+    """Tactile images sampled from a stored dataset.
+
+    Args:
+        task: the task played.
+        dataset: a loaded dataset, a path, or ``None`` for the default dataset
+            (``keys-train`` for discrete tasks, ``grid-<keys>`` for continuous
+            ones), generated into the cache on first use.
+        sensor: sensor preset of the default dataset.
+        layout: the keyboard.
+    """
+
+    name = "dataset"
+
+    def __init__(
+        self,
+        task: Task,
+        dataset: TactileDataset | str | Path | None = None,
+        sensor: str = "braille_331",
+        layout: KeyboardLayout | None = None,
+    ) -> None:
+        self.task = task
+        self.layout = layout or KeyboardLayout()
+        if dataset is None:
+            from tactile_braille.datasets.cache import default_dataset
+
+            name = f"grid-{task.keys}" if task.continuous else "keys-train"
+            dataset = default_dataset(name, sensor=sensor, progress=False)
+        elif not isinstance(dataset, TactileDataset):
+            dataset = load_dataset(dataset)
+        self.dataset = dataset
+        self.observations = dataset.observations
+        if task.continuous:
+            self._index_grid(dataset)
+        else:
+            self._index_keys(dataset)
+
+    # ---------------------------------------------------------- discrete
+    def _index_keys(self, dataset: TactileDataset) -> None:
+        if dataset.metadata.procedure.get("procedure") != "perturbed":
+            raise DatasetError(f"{dataset.path}: a discrete task needs a perturbed-taps dataset")
+        labels = dataset.label_names()
+        needed = [*(k for k in self.task.key_grid.ravel() if k != NONE_KEY), NONE_KEY]
+        missing = sorted(set(needed) - set(labels))
+        if missing:
+            raise DatasetError(f"{dataset.path} has no samples of {missing}")
+        # rows_by_code[c + 1] lists the samples of layout key c (row 0: NONE).
+        rows = [np.flatnonzero(labels == NONE_KEY)]
+        rows += [np.flatnonzero(labels == key.name) for key in self.layout.keys]
+        self._counts = np.array([len(r) for r in rows])
+        self._table = np.zeros((len(rows), max(self._counts.max(), 1)), dtype=np.int64)
+        for i, r in enumerate(rows):
+            self._table[i, : len(r)] = r
+
+    def discrete_taps(
+        self,
+        codes: np.ndarray,
+        press: np.ndarray,
+        positions_mm: np.ndarray,
+        rng: np.random.Generator,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Images for taps on keys ``codes`` (pressing where ``press``); returns (images, pressed codes)."""
+        slot = codes + 1
+        picks = self._table[slot, (rng.random(len(codes)) * self._counts[slot]).astype(np.int64)]
+        return self.observations[picks], np.where(press & (codes >= 0), codes, -1)
+
+    # -------------------------------------------------------- continuous
+    def _index_grid(self, dataset: TactileDataset) -> None:
+        if dataset.metadata.procedure.get("procedure") != "grid":
+            raise DatasetError(f"{dataset.path}: a continuous task needs a grid dataset")
+        poses = dataset.poses
+        axes = [np.unique(np.round(poses[:, i], 6)) for i in range(3)]
+        if len(dataset) != np.prod([len(a) for a in axes]):
+            raise DatasetError(f"{dataset.path}: the grid is incomplete ({len(dataset)} taps)")
+        steps = [a[1] - a[0] if len(a) > 1 else 1.0 for a in axes]
+        self._grid_start = np.array([a[0] for a in axes])
+        self._grid_step = np.array(steps)
+        self._grid_shape = np.array([len(a) for a in axes])
+        order = np.lexsort((poses[:, 2], poses[:, 1], poses[:, 0]))  # x outer, y, depth inner
+        self._grid_rows = order
+        self._grid_pressed = _codes_from_dataset(dataset, self.layout, dataset.pressed)
+
+    def continuous_taps(
+        self, x_mm: np.ndarray, y_mm: np.ndarray, depth_mm: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The stored samples nearest to the poses; returns (images, pressed codes)."""
+        pose = np.stack([x_mm, y_mm, depth_mm], axis=-1)
+        cell = np.rint((pose - self._grid_start) / self._grid_step).astype(np.int64)
+        cell = np.clip(cell, 0, self._grid_shape - 1)
+        flat = (cell[:, 0] * self._grid_shape[1] + cell[:, 1]) * self._grid_shape[2] + cell[:, 2]
+        rows = self._grid_rows[flat]
+        return self.observations[rows], self._grid_pressed[rows]
+
+
+class RigBackend:
+    """Tactile images from taps of a rig at the exact pose.
+
+    Discrete moves tap at the cell's position with the paper's perturbations
+    (x, y ~ U[-1, 1] mm, depth 5 mm + U[-1, 0], yaw ~ U[-10, 10] deg), a PRESS
+    goes 8 mm down, and NONE cells (off the keys) give a tap in the air.
+    Before every tap the rig is reseeded from the environment's generator,
+    so the virtual rig is deterministic from the environment's seed.
+
+    Args:
+        rig: the rig to tap with.
+    """
+
+    name = "rig"
+
+    def __init__(self, rig: Rig) -> None:
+        self.rig = rig
+        self.layout = rig.layout
+
+    def _tap(self, x: float, y: float, depth: float, yaw: float, rng: np.random.Generator):
+        self.rig.reseed(int(rng.integers(2**63 - 1)))
+        sample = self.rig.tap(x, y, depth, yaw)
+        code = self.layout.key(sample.pressed_key).index if sample.pressed_key is not None else -1
+        return process_frame(sample.frame, self.rig.processing), code
+
+    def discrete_taps(
+        self,
+        codes: np.ndarray,
+        press: np.ndarray,
+        positions_mm: np.ndarray,
+        rng: np.random.Generator,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Tap every cell; returns (images, pressed codes)."""
+        images, pressed = [], []
+        for code, pressing, (x, y) in zip(codes, press, positions_mm, strict=True):
+            dx, dy = rng.uniform(-1.0, 1.0, 2)
+            depth = (PRESS_DEPTH_MM if pressing else MOVE_TAP_DEPTH_MM) + rng.uniform(-1.0, 0.0)
+            if code < 0:
+                depth = 0.0  # an off-key cell: the sensor touches nothing
+            image, pressed_code = self._tap(x + dx, y + dy, depth, rng.uniform(-10.0, 10.0), rng)
+            images.append(image)
+            pressed.append(pressed_code if pressing else -1)
+        return np.stack(images), np.array(pressed, dtype=np.int64)
+
+    def continuous_taps(
+        self, x_mm: np.ndarray, y_mm: np.ndarray, depth_mm: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Tap at every pose; returns (images, pressed codes)."""
+        results = [self._tap(x, y, d, 0.0, rng) for x, y, d in zip(x_mm, y_mm, depth_mm, strict=True)]
+        images, pressed = zip(*results, strict=True)
+        return np.stack(images), np.array(pressed, dtype=np.int64)

@@ -1,0 +1,165 @@
+"""What the four braille environments share: backends, goals, observations, rendering."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from tactile_braille.datasets.store import TactileDataset
+from tactile_braille.envs.backends import DatasetBackend, RigBackend
+from tactile_braille.envs.core import BatchedBraille, compute_reward
+from tactile_braille.envs.rendering import top_view
+from tactile_braille.envs.tasks import Task
+from tactile_braille.rigs.base import Rig
+
+BACKENDS = ("dataset", "render", "rig")
+
+
+def make_backend(
+    task: Task,
+    backend: str,
+    dataset: TactileDataset | str | Path | None,
+    rig: Rig | None,
+    sensor: str,
+):
+    """Build the backend called ``backend`` for ``task``."""
+    if backend == "dataset":
+        return DatasetBackend(task, dataset, sensor=sensor)
+    if backend == "render":
+        from tactile_braille.rigs.virtual import VirtualRig
+
+        return RigBackend(VirtualRig(sensor=sensor))
+    if backend == "rig":
+        if rig is None:
+            raise ValueError("backend='rig' needs a rig (rig=...)")
+        return RigBackend(rig)
+    raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
+
+
+class BrailleEnv(gym.Env):
+    """Base of the braille-typing environments (see the subclasses for the docs)."""
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array", "human"], "render_fps": 4}
+    continuous: ClassVar[bool] = False
+
+    def __init__(
+        self,
+        keys: str = "arrows",
+        backend: str = "dataset",
+        dataset: TactileDataset | str | Path | None = None,
+        rig: Rig | None = None,
+        sensor: str = "braille_331",
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.task = Task(keys=keys, continuous=self.continuous)
+        self.backend_name = backend
+        self._core = BatchedBraille(self.task, make_backend(self.task, backend, dataset, rig, sensor), 1)
+        self.observation_space = self._core.observation_space()
+        self.action_space = self._core.action_space()
+        self.render_mode = render_mode
+        self._path_mm: list[tuple[float, float]] = []
+        self._all = np.ones(1, dtype=bool)
+        self._figure = None
+
+    @property
+    def goal_keys(self) -> tuple[str, ...]:
+        """The task's keys, in the order of the goal one-hots."""
+        return self._core.goal_keys
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode: a random goal key and a random start pose.
+
+        ``options={"goal_key": "Q"}`` fixes the goal instead.
+        """
+        super().reset(seed=seed)
+        self._core.reset(self._all, self.np_random)
+        if options and "goal_key" in options:
+            goal = options["goal_key"]
+            if goal not in self.goal_keys:
+                raise ValueError(f"goal_key {goal!r} is not one of {self.goal_keys}")
+            self._core.goal[0] = self.goal_keys.index(goal)
+        self._path_mm = [tuple(self._core.sensor_pose_mm()[0, :2])]
+        return self._observation(), self._info()
+
+    def step(self, action):
+        actions = self._core.check_actions(np.asarray(action)[None])
+        reward = float(self._core.step(actions, self._all, self.np_random)[0])
+        self._path_mm.append(tuple(self._core.sensor_pose_mm()[0, :2]))
+        terminated = bool(self._core.terminated[0])
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), reward, terminated, False, self._info()
+
+    def compute_reward(self, achieved_goal, desired_goal, info) -> np.ndarray:
+        """1.0 where the achieved key equals the desired one; batch-safe over the last axis."""
+        return compute_reward(achieved_goal, desired_goal, info)
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        return {name: value[0] for name, value in self._core.observations().items()}
+
+    def _info(self) -> dict[str, Any]:
+        core = self._core
+        return {
+            "is_success": bool(core.achieved[0] >= 0 and core.achieved[0] == core.goal[0]),
+            "pressed_key": core.pressed_key(0),
+            "sensor_pose_mm": core.sensor_pose_mm()[0].copy(),
+            "goal_key": self.goal_keys[int(core.goal[0])],
+        }
+
+    # ----------------------------------------------------------- render
+    def _view_mm(self) -> tuple[float, float, float, float]:
+        core = self._core
+        if self.task.continuous:
+            (x0, x1), (y0, y1) = self.task.workspace_mm
+            ox, oy = self.task.frame_origin_mm
+            corners = np.array([[x0 + ox, y0 + oy], [x1 + ox, y1 + oy]])
+        else:
+            corners = core.cell_positions_mm.reshape(-1, 2)
+        margin = 22.0
+        return (
+            corners[:, 0].min() - margin,
+            corners[:, 0].max() + margin,
+            corners[:, 1].min() - margin,
+            corners[:, 1].max() + margin,
+        )
+
+    def render(self):
+        """An RGB top view (``rgb_array``), or the same shown in a window (``human``)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        core = self._core
+        frame = top_view(
+            core.layout,
+            self._view_mm(),
+            self.goal_keys[int(core.goal[0])],
+            self._path_mm,
+            12.5,
+            core.pressed_key(0),
+            core.images[0],
+        )
+        if self.render_mode == "rgb_array":
+            return frame
+        import matplotlib.pyplot as plt
+
+        if self._figure is None:
+            self._figure = plt.figure("tactile_braille")
+        self._figure.clf()
+        self._figure.gca().imshow(frame)
+        self._figure.gca().axis("off")
+        plt.pause(1 / self.metadata["render_fps"])
+        return None
+
+    def close(self) -> None:
+        if self._figure is not None:
+            import matplotlib.pyplot as plt
+
+            plt.close(self._figure)
+            self._figure = None

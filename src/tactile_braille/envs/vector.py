@@ -1,0 +1,112 @@
+"""Batched braille environments on the dataset backend, stepped with NumPy over the batch.
+
+``gym.make_vec("tactile_braille/DiscreteArrows-v0", num_envs=64,
+vectorization_mode="vector_entry_point")`` builds one. The rules are those of
+the single environments (the same :class:`BatchedBraille` core).
+
+Autoreset mode: ``NEXT_STEP`` (Gymnasium's default). When a sub-environment
+terminates or is truncated, the step returns its final observation; the
+*next* call to ``step`` resets it (its action is ignored), returning the
+first observation of the new episode with reward 0 and no termination.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from tactile_braille.datasets.store import TactileDataset
+from tactile_braille.envs.backends import DatasetBackend
+from tactile_braille.envs.core import BatchedBraille, compute_reward
+from tactile_braille.envs.tasks import MAX_EPISODE_STEPS, Task
+
+
+class VectorBrailleEnv(VectorEnv):
+    """``num_envs`` braille environments on the dataset backend (see the module docs).
+
+    Args:
+        num_envs: batch size.
+        keys: ``"arrows"`` or ``"alphabet"``.
+        dataset: the dataset or its path (default: the cached one).
+        sensor: sensor preset of the default dataset.
+        max_episode_steps: truncation (25, the registry's).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+    continuous: ClassVar[bool] = False
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        keys: str = "arrows",
+        dataset: TactileDataset | str | Path | None = None,
+        sensor: str = "braille_331",
+        max_episode_steps: int = MAX_EPISODE_STEPS,
+        backend: str = "dataset",
+    ) -> None:
+        if backend != "dataset":
+            raise ValueError("the vectorised environment runs on the dataset backend only")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        self.num_envs = int(num_envs)
+        self.task = Task(keys=keys, continuous=self.continuous)
+        self._core = BatchedBraille(self.task, DatasetBackend(self.task, dataset, sensor=sensor), num_envs)
+        self.single_observation_space = self._core.observation_space()
+        self.single_action_space = self._core.action_space()
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.max_episode_steps = int(max_episode_steps)
+        self._steps = np.zeros(num_envs, dtype=np.int64)
+        self._needs_reset = np.zeros(num_envs, dtype=bool)
+        self._np_random, _ = seeding.np_random(None)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Reset every sub-environment (``seed`` seeds the whole batch)."""
+        if seed is not None:
+            self._np_random, _ = seeding.np_random(seed)
+            self.action_space.seed(seed)
+        everyone = np.ones(self.num_envs, dtype=bool)
+        self._core.reset(everyone, self._np_random)
+        self._steps[:] = 0
+        self._needs_reset[:] = False
+        return self._core.observations(), self._infos()
+
+    def step(self, actions):
+        """Step every sub-environment; those that ended last step are reset instead."""
+        actions = self._core.check_actions(actions)
+        resetting = self._needs_reset
+        active = ~resetting
+        rewards = self._core.step(actions, active, self._np_random)
+        self._core.reset(resetting, self._np_random)
+        self._steps = np.where(resetting, 0, self._steps + 1)
+        terminated = self._core.terminated & active
+        truncated = (self._steps >= self.max_episode_steps) & active & ~terminated
+        self._needs_reset = terminated | truncated
+        return self._core.observations(), rewards, terminated, truncated, self._infos()
+
+    def compute_reward(self, achieved_goal, desired_goal, info) -> np.ndarray:
+        """1.0 where the achieved key equals the desired one; batch-safe over the last axis."""
+        return compute_reward(achieved_goal, desired_goal, info)
+
+    def _infos(self) -> dict[str, np.ndarray]:
+        core = self._core
+        success = (core.achieved >= 0) & (core.achieved == core.goal)
+        every = np.ones(self.num_envs, dtype=bool)
+        return {"is_success": success, "_is_success": every, "goal": core.goal.copy(), "_goal": every}
+
+
+class VectorDiscreteBrailleEnv(VectorBrailleEnv):
+    """Batched discrete braille environments (dataset backend)."""
+
+    continuous: ClassVar[bool] = False
+
+
+class VectorContinuousBrailleEnv(VectorBrailleEnv):
+    """Batched continuous braille environments (dataset backend)."""
+
+    continuous: ClassVar[bool] = True
