@@ -9,12 +9,19 @@ stale: it is regenerated (with a message), never silently reused.
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 from pathlib import Path
 
 from tactile_braille.datasets.collect import GENERATOR_VERSION, collect, dataset_metadata
 from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps, Procedure
-from tactile_braille.datasets.store import DatasetError, TactileDataset, load_dataset
+from tactile_braille.datasets.store import (
+    DatasetError,
+    ResumeMismatchError,
+    TactileDataset,
+    load_dataset,
+    partial_path,
+)
 from tactile_braille.rigs.virtual import VirtualRig
 
 DEFAULT_DATASETS: dict[str, Procedure] = {
@@ -70,5 +77,11 @@ def default_dataset(
         print(f"tactile_braille: regenerating stale cached dataset {path} ({reason})", file=sys.stderr)
         path.unlink()
     path.parent.mkdir(parents=True, exist_ok=True)
-    collect(rig, procedure, path, seed=seed, resume=True, progress=progress)
+    try:
+        collect(rig, procedure, path, seed=seed, resume=True, progress=progress)
+    except ResumeMismatchError as error:
+        # An interrupted generation by another version or with other settings.
+        print(f"tactile_braille: discarding a stale interrupted generation ({error})", file=sys.stderr)
+        shutil.rmtree(partial_path(path))
+        collect(rig, procedure, path, seed=seed, resume=False, progress=progress)
     return load_dataset(path)

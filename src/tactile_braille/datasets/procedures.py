@@ -148,11 +148,15 @@ class GridTaps:
         if self.keys not in self._PAPER:
             raise ValueError(f"grid keys must be one of {sorted(self._PAPER)}, got {self.keys!r}")
         paper = self._PAPER[self.keys]
+
+        def pick(value, default):
+            return default if value is None else value
+
         resolved = {
-            "spacing_mm": self.spacing_mm or paper["spacing_mm"],
-            "depth_step_mm": self.depth_step_mm or paper["depth_step_mm"],
-            "x_range_mm": tuple(self.x_range_mm or paper["x"]),
-            "y_range_mm": tuple(self.y_range_mm or paper["y"]),
+            "spacing_mm": pick(self.spacing_mm, paper["spacing_mm"]),
+            "depth_step_mm": pick(self.depth_step_mm, paper["depth_step_mm"]),
+            "x_range_mm": tuple(pick(self.x_range_mm, paper["x"])),
+            "y_range_mm": tuple(pick(self.y_range_mm, paper["y"])),
         }
         for name in ("spacing_mm", "depth_step_mm"):
             if not resolved[name] > 0:

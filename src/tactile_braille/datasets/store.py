@@ -51,6 +51,10 @@ class DatasetError(ValueError):
     """A dataset file is missing, corrupt, truncated, foreign or not what was expected."""
 
 
+class ResumeMismatchError(DatasetError):
+    """An interrupted collection was started with other settings than the one resuming it."""
+
+
 @dataclass(frozen=True)
 class DatasetMetadata:
     """What a dataset is: how, with what and from what it was collected.
@@ -97,7 +101,12 @@ class DatasetMetadata:
     def from_attrs(cls, attrs, source: object) -> DatasetMetadata:
         if attrs.get("format") != FORMAT_NAME:
             raise DatasetError(f"{source} is not a tactile_braille dataset (format={attrs.get('format')!r})")
-        version = int(attrs.get("format_version", -1))
+        try:
+            version = int(attrs.get("format_version", -1))
+        except (TypeError, ValueError):
+            raise DatasetError(
+                f"{source} has a malformed format_version {attrs.get('format_version')!r}"
+            ) from None
         if version != FORMAT_VERSION:
             raise DatasetError(
                 f"{source} has format version {version}; this code reads version {FORMAT_VERSION}"
@@ -150,6 +159,8 @@ def _read_arrays(path: Path) -> tuple[DatasetMetadata, dict[str, np.ndarray]]:
             if name not in handle:
                 raise DatasetError(f"{path} lacks the array {name!r}")
             dataset = handle[name]
+            if not isinstance(dataset, h5py.Dataset):
+                raise DatasetError(f"{path}: {name!r} is not an array")
             if dataset.dtype != _DTYPES[name]:
                 raise DatasetError(
                     f"{path}: {name} has dtype {dataset.dtype}, expected {np.dtype(_DTYPES[name])}"
@@ -182,6 +193,12 @@ def _validate_arrays(arrays: dict[str, np.ndarray], metadata: DatasetMetadata, s
         raise DatasetError(f"{source}: duplicate tap indices")
 
 
+def partial_path(path: str | Path) -> Path:
+    """The folder that holds the shards of an unfinished collection into ``path``."""
+    path = Path(path)
+    return path.with_name(path.name + ".partial")
+
+
 class DatasetWriter:
     """Append samples to a dataset under construction; finalise it atomically.
 
@@ -206,7 +223,7 @@ class DatasetWriter:
         self.metadata = metadata
         self.total = int(total)
         self.shard_size = int(shard_size)
-        self.partial = self.path.with_name(self.path.name + ".partial")
+        self.partial = partial_path(self.path)
         if self.path.exists():
             raise FileExistsError(f"{self.path} exists already; remove it or choose another output")
         manifest = self.partial / _MANIFEST
@@ -219,7 +236,7 @@ class DatasetWriter:
             recorded = json.loads(manifest.read_text())
             wanted = {"metadata": metadata.as_json(), "total": self.total}
             if recorded != wanted:
-                raise DatasetError(
+                raise ResumeMismatchError(
                     f"cannot resume {self.partial}: it was started with other settings "
                     f"(recorded {recorded}, now {wanted})"
                 )

@@ -119,7 +119,7 @@ class DatasetBackend:
         """The stored samples nearest to the poses; returns (images, pressed codes)."""
         pose = np.stack([x_mm, y_mm, depth_mm], axis=-1)
         cell = np.rint((pose - self._grid_start) / self._grid_step).astype(np.int64)
-        cell = np.clip(cell, 0, self._grid_shape - 1)
+        cell = np.minimum(np.maximum(cell, 0), self._grid_shape - 1)
         flat = (cell[:, 0] * self._grid_shape[1] + cell[:, 1]) * self._grid_shape[2] + cell[:, 2]
         rows = self._grid_rows[flat]
         return self.observations[rows], self._grid_pressed[rows]

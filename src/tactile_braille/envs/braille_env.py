@@ -85,32 +85,41 @@ class BrailleEnv(gym.Env):
             if goal not in self.goal_keys:
                 raise ValueError(f"goal_key {goal!r} is not one of {self.goal_keys}")
             self._core.goal[0] = self.goal_keys.index(goal)
-        self._path_mm = [tuple(self._core.sensor_pose_mm()[0, :2])]
-        return self._observation(), self._info()
+        pose = self._core.sensor_pose_mm()[0]
+        self._path_mm = [(pose[0], pose[1])]
+        return self._observation(), self._info(pose)
 
     def step(self, action):
         actions = self._core.check_actions(np.asarray(action)[None])
         reward = float(self._core.step(actions, self._all, self.np_random)[0])
-        self._path_mm.append(tuple(self._core.sensor_pose_mm()[0, :2]))
-        terminated = bool(self._core.terminated[0])
+        pose = self._core.sensor_pose_mm()[0]
+        self._path_mm.append((pose[0], pose[1]))
+        terminated = bool(self._core.pressed_code[0] >= 0)
         if self.render_mode == "human":
             self.render()
-        return self._observation(), reward, terminated, False, self._info()
+        return self._observation(), reward, terminated, False, self._info(pose)
 
     def compute_reward(self, achieved_goal, desired_goal, info) -> np.ndarray:
         """1.0 where the achieved key equals the desired one; batch-safe over the last axis."""
         return compute_reward(achieved_goal, desired_goal, info)
 
     def _observation(self) -> dict[str, np.ndarray]:
-        return {name: value[0] for name, value in self._core.observations().items()}
-
-    def _info(self) -> dict[str, Any]:
         core = self._core
         return {
-            "is_success": bool(core.achieved[0] >= 0 and core.achieved[0] == core.goal[0]),
+            "observation": core.images[0, :, :, None].copy(),
+            "previous_action": core.previous_action[0].copy(),
+            "achieved_goal": core.one_hot(core.achieved[0]).copy(),
+            "desired_goal": core.one_hot(core.goal[0]).copy(),
+        }
+
+    def _info(self, pose: np.ndarray) -> dict[str, Any]:
+        core = self._core
+        achieved, goal = int(core.achieved[0]), int(core.goal[0])
+        return {
+            "is_success": achieved >= 0 and achieved == goal,
             "pressed_key": core.pressed_key(0),
-            "sensor_pose_mm": core.sensor_pose_mm()[0].copy(),
-            "goal_key": self.goal_keys[int(core.goal[0])],
+            "sensor_pose_mm": pose,
+            "goal_key": self.goal_keys[goal],
         }
 
     # ----------------------------------------------------------- render

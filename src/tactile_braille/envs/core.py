@@ -83,6 +83,9 @@ class BatchedBraille:
         self._workspace_low = np.array([x_low, y_low])
         self._workspace_high = np.array([x_high, y_high])
 
+        goals = len(self.goal_keys)
+        self._one_hot_table = np.vstack([np.eye(goals), np.zeros(goals)]).astype(np.float32)
+        self._action_one_hot = np.eye(len(DISCRETE_ACTIONS), dtype=np.float32)
         size = OBSERVATION_SIZE_PX
         self.images = np.zeros((n, size, size), dtype=np.uint8)
         self.goal = np.zeros(n, dtype=np.int64)
@@ -178,10 +181,10 @@ class BatchedBraille:
                 raise ValueError(f"continuous actions must be real numbers, got dtype {actions.dtype}")
             if not np.isfinite(actions).all():
                 raise ValueError(f"continuous actions must be finite, got {actions.tolist()}")
-            return np.clip(actions.astype(np.float64), -1.0, 1.0)
+            return np.minimum(np.maximum(actions.astype(np.float64), -1.0), 1.0)
         if actions.shape != (self.n,):
             raise ValueError(f"expected discrete actions of shape {(self.n,)}, got {actions.shape}")
-        if not np.issubdtype(actions.dtype, np.integer):
+        if actions.dtype.kind not in "iu":
             raise ValueError(f"discrete actions must be integers, got dtype {actions.dtype}")
         if ((actions < 0) | (actions >= len(DISCRETE_ACTIONS))).any():
             raise ValueError(
@@ -196,7 +199,7 @@ class BatchedBraille:
         if self.task.continuous:
             move = self.action_to_mm(actions)
             moved = self.position_mm[index] + move[:, :2]
-            self.position_mm[index] = np.clip(moved, self._workspace_low, self._workspace_high)
+            self.position_mm[index] = np.minimum(np.maximum(moved, self._workspace_low), self._workspace_high)
             self.depth_mm[index] = move[:, 2]
             xy = self.position_mm[index] + self._frame_origin
             images, pressed = self.backend.continuous_taps(xy[:, 0], xy[:, 1], move[:, 2], rng)
@@ -208,7 +211,7 @@ class BatchedBraille:
             self.cell[index] = np.where(inside[:, None], target, self.cell[index])
             press = actions == _PRESS
             images, pressed = self._discrete_taps(index, press, rng)
-            self.previous_action[index] = np.eye(len(DISCRETE_ACTIONS), dtype=np.float32)[actions]
+            self.previous_action[index] = self._action_one_hot[actions]
         self.images[index] = images
         self.pressed_code[index] = pressed
         self.achieved[index] = self._goal_of_code[pressed]  # code -1 maps to the table's last entry (-1)
@@ -224,8 +227,7 @@ class BatchedBraille:
     # ------------------------------------------------------ observations
     def one_hot(self, goal_index: np.ndarray) -> np.ndarray:
         """Goal indices (-1: none) as float32 one-hot rows (zeros for none)."""
-        eye = np.vstack([np.eye(len(self.goal_keys), dtype=np.float32), np.zeros(len(self.goal_keys))])
-        return eye[goal_index].astype(np.float32)  # index -1 picks the zero row
+        return self._one_hot_table[goal_index]  # index -1 picks the zero row
 
     def observations(self) -> dict[str, np.ndarray]:
         """Batched observation arrays (fresh copies)."""
