@@ -1,0 +1,194 @@
+"""The default datasets cache: generated on first use, reused after, regenerated when stale."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest_datasets import FaultyRig, assert_same_arrays, cache_module, collect, collect_module
+from tactile_braille.datasets.cache import data_dir, default_dataset, default_dataset_path
+from tactile_braille.datasets.procedures import PerturbedTaps
+from tactile_braille.datasets.store import load_dataset
+from tactile_braille.rigs.base import RigError
+from tactile_braille.rigs.virtual import VirtualRig
+
+TINY = PerturbedTaps(keys="arrows", per_key=2)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch) -> Path:
+    directory = tmp_path / "cache"
+    monkeypatch.setenv("TACTILE_BRAILLE_DATA", str(directory))
+    monkeypatch.setattr(cache_module, "DEFAULT_DATASETS", {"tiny": TINY})
+    return directory
+
+
+def _forbid_collect(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("the cached dataset should have been reused")
+
+    monkeypatch.setattr(cache_module, "collect", refuse)
+
+
+def _bump_generator_version(monkeypatch, version: str = "9.9.9+test") -> str:
+    monkeypatch.setattr(cache_module, "GENERATOR_VERSION", version)
+    monkeypatch.setattr(collect_module, "GENERATOR_VERSION", version)
+    return version
+
+
+def test_data_dir_follows_the_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv("TACTILE_BRAILLE_DATA", str(tmp_path / "data"))
+    assert data_dir() == tmp_path / "data"
+    monkeypatch.delenv("TACTILE_BRAILLE_DATA")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert data_dir() == tmp_path / "xdg" / "tactile_braille"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert data_dir() == tmp_path / "home" / ".cache" / "tactile_braille"
+
+
+def test_default_dataset_path_names_dataset_sensor_and_seed(cache):
+    assert default_dataset_path("tiny") == cache / "tiny__braille_331__seed0.h5"
+    assert default_dataset_path("tiny", sensor="tactip_127", seed=3) == cache / "tiny__tactip_127__seed3.h5"
+
+
+def test_unknown_name_raises_value_error_listing_names(cache):
+    for call in (default_dataset_path, default_dataset):
+        with pytest.raises(ValueError, match=r"unknown default dataset 'nope'.*\['tiny'\]"):
+            call("nope")
+    assert not cache.exists() or not any(cache.iterdir())
+
+
+def test_the_papers_datasets_are_registered():
+    names = sorted(cache_module.DEFAULT_DATASETS)
+    assert names == ["grid-alphabet", "grid-arrows", "keys-train", "keys-validation"]
+    assert len(cache_module.DEFAULT_DATASETS["keys-train"]) == 3200
+    assert len(cache_module.DEFAULT_DATASETS["keys-validation"]) == 1600
+
+
+def test_first_call_generates_second_call_reuses(cache, monkeypatch, capsys):
+    path = default_dataset_path("tiny")
+    assert not path.exists()
+    first = default_dataset("tiny", progress=False)
+    assert path.exists()
+    assert len(first) == len(TINY) == 10
+    assert first.metadata == collect_module.dataset_metadata(VirtualRig(), TINY, 0)
+    assert list(first.label_names()[::2]) == ["UP", "DOWN", "LEFT", "RIGHT", "NONE"]
+    assert "regenerating" not in capsys.readouterr().err
+    assert sorted(p.name for p in cache.iterdir()) == [path.name]
+
+    before = path.stat()
+    _forbid_collect(monkeypatch)
+    second = default_dataset("tiny", progress=False)
+    after = path.stat()
+    assert (after.st_ino, after.st_mtime_ns, after.st_size) == (
+        before.st_ino,
+        before.st_mtime_ns,
+        before.st_size,
+    )
+    assert_same_arrays(second, first)
+    assert capsys.readouterr().err == ""
+
+
+def test_generation_is_deterministic_from_the_seed(cache, tmp_path):
+    dataset = default_dataset("tiny", progress=False)
+    reference = tmp_path / "reference.h5"
+    collect(VirtualRig(seed=0), TINY, reference, seed=0, progress=False)
+    assert_same_arrays(dataset, load_dataset(reference))
+    other = default_dataset("tiny", seed=1, progress=False)
+    assert other.path == cache / "tiny__braille_331__seed1.h5"
+    np.testing.assert_array_equal(other.poses, dataset.poses)
+    assert not np.array_equal(other.observations, dataset.observations)
+
+
+def test_other_generator_version_regenerates_with_a_message(cache, monkeypatch, capsys):
+    old = default_dataset("tiny", progress=False)
+    path = default_dataset_path("tiny")
+    capsys.readouterr()
+    version = _bump_generator_version(monkeypatch)
+
+    new = default_dataset("tiny", progress=False)
+    err = capsys.readouterr().err
+    assert f"regenerating stale cached dataset {path}" in err
+    assert f"generator version {old.metadata.generator_version} != {version}" in err
+    assert new.metadata.generator_version == version
+    assert load_dataset(path).metadata.generator_version == version
+    assert_same_arrays(new, old)  # the samples themselves did not change here
+
+    # Regenerated once, then reused.
+    _forbid_collect(monkeypatch)
+    assert default_dataset("tiny", progress=False).metadata.generator_version == version
+    assert capsys.readouterr().err == ""
+
+
+def test_other_procedure_regenerates(cache, monkeypatch, capsys):
+    default_dataset("tiny", progress=False)
+    capsys.readouterr()
+    monkeypatch.setattr(cache_module, "DEFAULT_DATASETS", {"tiny": PerturbedTaps(keys="arrows", per_key=3)})
+    dataset = default_dataset("tiny", progress=False)
+    assert len(dataset) == 15
+    assert "different procedure, keyboard or sensor parameters" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("damage", ["random", "truncate"])
+def test_corrupt_cached_file_is_regenerated(cache, capsys, damage):
+    original = default_dataset("tiny", progress=False)
+    path = default_dataset_path("tiny")
+    if damage == "random":
+        path.write_bytes(os.urandom(2048))
+    else:
+        with open(path, "r+b") as handle:
+            handle.truncate(path.stat().st_size // 2)
+    capsys.readouterr()
+
+    regenerated = default_dataset("tiny", progress=False)
+    err = capsys.readouterr().err
+    assert "regenerating stale cached dataset" in err
+    assert "not a readable HDF5 file" in err
+    assert_same_arrays(regenerated, original)
+    assert_same_arrays(load_dataset(path), original)
+
+
+def test_interrupted_generation_is_resumed(cache, monkeypatch, capsys):
+    path = default_dataset_path("tiny")
+    path.parent.mkdir(parents=True)
+    with pytest.raises(RigError):
+        collect(FaultyRig(fail_at=6, seed=0), TINY, path, seed=0, progress=False, shard_size=2)
+    partial = path.with_name(path.name + ".partial")
+    assert partial.exists()
+
+    calls = []
+    real_collect = cache_module.collect
+
+    def spy(rig, procedure, output, **kwargs):
+        calls.append(kwargs)
+        return real_collect(rig, procedure, output, **kwargs)
+
+    monkeypatch.setattr(cache_module, "collect", spy)
+    dataset = default_dataset("tiny", progress=False)
+    assert calls and calls[0]["resume"] is True
+    assert not partial.exists()
+    reference = cache.parent / "reference.h5"
+    collect(VirtualRig(seed=0), TINY, reference, seed=0, progress=False)
+    assert_same_arrays(dataset, load_dataset(reference))
+
+
+def test_stale_interrupted_generation_is_regenerated(cache, monkeypatch, capsys):
+    path = default_dataset_path("tiny")
+    path.parent.mkdir(parents=True)
+    with pytest.raises(RigError):
+        collect(FaultyRig(fail_at=6, seed=0), TINY, path, seed=0, progress=False, shard_size=2)
+    partial = path.with_name(path.name + ".partial")
+    assert partial.exists()
+    capsys.readouterr()
+    version = _bump_generator_version(monkeypatch)
+    dataset = default_dataset("tiny", progress=False)
+    assert "stale interrupted generation" in capsys.readouterr().err
+    assert dataset.metadata.generator_version == version
+    assert load_dataset(path).metadata.generator_version == version
+    assert len(dataset) == len(TINY)
+    np.testing.assert_array_equal(dataset.tap_index, np.arange(len(TINY)))
+    assert not partial.exists()
