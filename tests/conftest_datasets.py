@@ -22,9 +22,9 @@ from tactile_braille.rigs.virtual import VirtualRig
 
 # ``tactile_braille.datasets`` re-exports the function ``collect``, which shadows the
 # submodule of the same name as an attribute of the package: ``import
-# tactile_braille.datasets.collect as m`` (or monkeypatching by dotted name) gives the
+# tactile_braille.datasets.collector as m`` (or monkeypatching by dotted name) gives the
 # function. Go through the module registry to get the module itself.
-collect_module = importlib.import_module("tactile_braille.datasets.collect")
+collect_module = importlib.import_module("tactile_braille.datasets.collector")
 cache_module = importlib.import_module("tactile_braille.datasets.cache")
 collect = collect_module.collect
 

@@ -9,7 +9,7 @@ import pytest
 
 from conftest_datasets import FaultyRig, black_frame, cache_module, collect, write_video
 from tactile_braille.cli import build_parser, main
-from tactile_braille.datasets.collect import dataset_metadata
+from tactile_braille.datasets.collector import dataset_metadata
 from tactile_braille.datasets.procedures import PerturbedTaps
 from tactile_braille.datasets.store import load_dataset
 from tactile_braille.keyboard.layout import NONE_KEY

@@ -32,7 +32,7 @@ CHILD = textwrap.dedent(
     import sys
     import time
 
-    from tactile_braille.datasets.collect import collect
+    from tactile_braille.datasets.collector import collect
     from tactile_braille.datasets.procedures import PerturbedTaps
     from tactile_braille.rigs.virtual import VirtualRig
 

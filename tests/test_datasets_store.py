@@ -24,7 +24,7 @@ from conftest_datasets import (
     replace_array,
     shard_indices,
 )
-from tactile_braille.datasets.collect import GENERATOR_VERSION, dataset_metadata
+from tactile_braille.datasets.collector import GENERATOR_VERSION, dataset_metadata
 from tactile_braille.datasets.procedures import PerturbedTaps
 from tactile_braille.datasets.store import (
     FORMAT_NAME,

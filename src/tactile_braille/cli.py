@@ -47,7 +47,7 @@ def _make_rig(args: argparse.Namespace):
 
 
 def _collect(args: argparse.Namespace) -> int:
-    from tactile_braille.datasets.collect import collect
+    from tactile_braille.datasets.collector import collect
     from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps
 
     if args.procedure == "perturbed":

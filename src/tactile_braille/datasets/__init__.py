@@ -2,7 +2,7 @@
 the original release's importer and the default datasets cache."""
 
 from tactile_braille.datasets.cache import DEFAULT_DATASETS, data_dir, default_dataset, default_dataset_path
-from tactile_braille.datasets.collect import GENERATOR_VERSION, collect, dataset_metadata
+from tactile_braille.datasets.collector import GENERATOR_VERSION, collect, dataset_metadata
 from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps, TapSpec
 from tactile_braille.datasets.store import (
     FORMAT_VERSION,

@@ -13,7 +13,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from tactile_braille.datasets.collect import GENERATOR_VERSION, collect, dataset_metadata
+from tactile_braille.datasets.collector import GENERATOR_VERSION, collect, dataset_metadata
 from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps, Procedure
 from tactile_braille.datasets.store import (
     DatasetError,
