@@ -8,6 +8,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from tactile_braille.sensor.config import PRESETS
 
 
@@ -15,13 +17,7 @@ def _show(args: argparse.Namespace) -> int:
     from tactile_braille.gallery import dataset_figure, live_gallery_tiles, save_figure, save_gallery
 
     if args.dataset is not None:
-        from tactile_braille.datasets.cache import DEFAULT_DATASETS, default_dataset
-        from tactile_braille.datasets.store import load_dataset
-
-        if not Path(args.dataset).exists() and args.dataset in DEFAULT_DATASETS:
-            dataset = default_dataset(args.dataset, sensor=args.sensor, seed=args.seed)
-        else:
-            dataset = load_dataset(args.dataset)
+        dataset = _load_named_dataset(args.dataset, args.sensor, args.seed)
         path = save_figure(dataset_figure(dataset), args.output)
         print(f"wrote {path} ({len(dataset)} taps in {args.dataset})")
         return 0
@@ -87,6 +83,57 @@ def _data(args: argparse.Namespace) -> int:
     return 0
 
 
+def _load_named_dataset(name_or_path: str, sensor: str, seed: int):
+    from tactile_braille.datasets.cache import DEFAULT_DATASETS, default_dataset
+    from tactile_braille.datasets.store import load_dataset
+
+    if not Path(name_or_path).exists() and name_or_path in DEFAULT_DATASETS:
+        return default_dataset(name_or_path, sensor=sensor, seed=seed)
+    return load_dataset(name_or_path)
+
+
+def _classify(args: argparse.Namespace) -> int:
+    import torch
+
+    from tactile_braille.supervised.classifier import (
+        ClassifierConfig,
+        confusion_matrix,
+        predict,
+        save_classifier,
+        select_classes,
+        train_classifier,
+    )
+    from tactile_braille.supervised.report import save_confusion_matrix, top_confusions
+
+    torch.set_num_threads(args.threads)
+    train = _load_named_dataset(args.train, args.sensor, 0)
+    validation = _load_named_dataset(args.validation, args.sensor, 0)
+    config = ClassifierConfig(max_epochs=args.epochs, seed=args.seed)
+    start = time.perf_counter()
+    result = train_classifier(train, validation, config, progress=True)
+    images, labels = select_classes(validation, config.classes)
+    truth = [config.classes[i] for i in labels]
+    predicted = predict(result.model, images, config.classes)
+    accuracy = float((predicted == np.asarray(truth)).mean())
+    matrix = confusion_matrix(np.asarray(truth), predicted, config.classes)
+    mistakes = top_confusions(matrix, config.classes)
+    output = Path(args.output or f"runs/classifier__seed{args.seed}__{time.strftime('%Y%m%d-%H%M%S')}")
+    metrics = {"val_accuracy": accuracy, "top_confusions": mistakes}
+    metrics.update(train=str(train.path), validation=str(validation.path))
+    save_classifier(result, output, metrics)
+    save_confusion_matrix(matrix, config.classes, output / "confusion.png",
+                          f"validation accuracy {accuracy:.1%} ({len(truth)} images)")  # fmt: skip
+    print(f"validation accuracy {accuracy:.2%} on {len(truth)} images, best epoch {result.best_epoch}, "
+          f"{time.perf_counter() - start:.0f} s")  # fmt: skip
+    for mistake in mistakes[:5]:
+        print(
+            f"  {mistake['true']} -> {mistake['predicted']}: {mistake['count']}"
+            + (f" (differ by dots {mistake['dots_differing']})" if "dots_differing" in mistake else "")
+        )
+    print(f"wrote {output}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tactile-braille``."""
     parser = argparse.ArgumentParser(
@@ -125,6 +172,18 @@ def build_parser() -> argparse.ArgumentParser:
     importer.add_argument("--grid-frame", choices=("alphabet", "arrows"), default=None)
     importer.add_argument("--resume", action="store_true")
     importer.set_defaults(handler=_import)
+
+    classify = commands.add_parser("classify", help="train and evaluate the supervised key classifier")
+    classify.add_argument("--train", default="keys-train", help="dataset file or default dataset name")
+    classify.add_argument("--validation", default="keys-validation", help="dataset file or default name")
+    classify.add_argument(
+        "--output", type=Path, default=None, help="run folder (default: runs/classifier__...)"
+    )
+    classify.add_argument("--epochs", type=int, default=60, help="maximum epochs (early stopping)")
+    classify.add_argument("--seed", type=int, default=0)
+    classify.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
+    classify.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    classify.set_defaults(handler=_classify)
 
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
     data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))

@@ -1,0 +1,48 @@
+"""Pictures and summaries of a key classifier's results."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tactile_braille.keyboard.braille import BRAILLE_DOTS
+
+
+def top_confusions(matrix: np.ndarray, classes: tuple[str, ...], count: int = 10) -> list[dict]:
+    """The most frequent mistakes, with the braille dots the two keys differ by."""
+    mistakes = []
+    for i, true in enumerate(classes):
+        for j, predicted in enumerate(classes):
+            if i != j and matrix[i, j]:
+                entry = {"true": true, "predicted": predicted, "count": int(matrix[i, j])}
+                if true in BRAILLE_DOTS and predicted in BRAILLE_DOTS:
+                    entry["dots_differing"] = sorted(set(BRAILLE_DOTS[true]) ^ set(BRAILLE_DOTS[predicted]))
+                mistakes.append(entry)
+    return sorted(mistakes, key=lambda m: -m["count"])[:count]
+
+
+def save_confusion_matrix(
+    matrix: np.ndarray, classes: tuple[str, ...], output: str | Path, title: str
+) -> Path:
+    """Write the confusion matrix (rows: true key, columns: predicted) as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tactile_braille.gallery import save_figure
+
+    fig, ax = plt.subplots(figsize=(8.5, 7.5))
+    shown = np.where(matrix > 0, matrix, np.nan)
+    image = ax.imshow(shown, cmap="viridis", interpolation="nearest")
+    ax.set_xticks(range(len(classes)), classes, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(classes)), classes, fontsize=7)
+    ax.set_xlabel("predicted key")
+    ax.set_ylabel("true key")
+    for i, j in zip(*np.nonzero((matrix > 0) & ~np.eye(len(classes), dtype=bool)), strict=True):
+        ax.text(j, i, str(matrix[i, j]), ha="center", va="center", fontsize=6, color="white")
+    fig.colorbar(image, ax=ax, fraction=0.04)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return save_figure(fig, output)
