@@ -90,7 +90,10 @@ class BrailleEnv(gym.Env):
         return self._observation(), self._info(pose)
 
     def step(self, action):
-        actions = self._core.check_actions(np.asarray(action)[None])
+        action = np.asarray(action)
+        if action.shape != self.action_space.shape:
+            raise ValueError(f"expected an action of shape {self.action_space.shape}, got {action.shape}")
+        actions = self._core.check_actions(action[None])
         reward = float(self._core.step(actions, self._all, self.np_random)[0])
         pose = self._core.sensor_pose_mm()[0]
         self._path_mm.append((pose[0], pose[1]))

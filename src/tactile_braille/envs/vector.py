@@ -85,7 +85,7 @@ class VectorBrailleEnv(VectorEnv):
         self._core.reset(resetting, self._np_random)
         self._steps = np.where(resetting, 0, self._steps + 1)
         terminated = self._core.terminated & active
-        truncated = (self._steps >= self.max_episode_steps) & active & ~terminated
+        truncated = (self._steps >= self.max_episode_steps) & active  # as TimeLimit: also when terminated
         self._needs_reset = terminated | truncated
         return self._core.observations(), rewards, terminated, truncated, self._infos()
 
