@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.datasets import GridTaps, PerturbedTaps, collect, default_dataset_path
+from tactile_braille.datasets import default_dataset_path
 from tactile_braille.envs import ENV_IDS, MAX_EPISODE_STEPS
 from tactile_braille.envs.continuous import ContinuousBrailleEnv
 from tactile_braille.envs.core import compute_reward
@@ -38,42 +38,10 @@ MOVES = {UP: (-1, 0), DOWN: (1, 0), LEFT: (0, -1), RIGHT: (0, 1)}
 
 
 # ----------------------------------------------------------------------------- fixtures
-@pytest.fixture(scope="module", autouse=True)
-def _cache_in_tmp(tmp_path_factory):
-    """Point the default-dataset cache at a session-wide temporary folder while this module runs."""
-    folder = tmp_path_factory.getbasetemp() / "tactile_braille_cache"
-    folder.mkdir(exist_ok=True)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("TACTILE_BRAILLE_DATA", str(folder))
-        yield folder
-
-
-def _collect_once(tmp_path_factory, name: str, procedure) -> Path:
-    """Collect ``procedure`` on the virtual rig into a session-wide folder (once per session)."""
-    folder = tmp_path_factory.getbasetemp() / "tactile_braille_env_datasets"
-    folder.mkdir(exist_ok=True)
-    path = folder / f"{name}.h5"
-    if not path.exists():
-        collect(VirtualRig(seed=0), procedure, path, seed=0, progress=False)
-    return path
-
-
 @pytest.fixture(scope="session")
-def datasets(tmp_path_factory) -> dict[str, Path]:
-    """Small datasets, keyed by env id: 3 perturbed taps per key, coarse grids (3 depths)."""
-    perturbed = _collect_once(tmp_path_factory, "perturbed-all-3", PerturbedTaps(keys="all", per_key=3))
-    arrows = _collect_once(
-        tmp_path_factory, "grid-arrows-4mm", GridTaps(keys="arrows", spacing_mm=4, depth_step_mm=3)
-    )
-    alphabet = _collect_once(
-        tmp_path_factory, "grid-alphabet-6mm", GridTaps(keys="alphabet", spacing_mm=6, depth_step_mm=3)
-    )
-    return {
-        "tactile_braille/DiscreteArrows-v0": perturbed,
-        "tactile_braille/DiscreteAlphabet-v0": perturbed,
-        "tactile_braille/ContinuousArrows-v0": arrows,
-        "tactile_braille/ContinuousAlphabet-v0": alphabet,
-    }
+def datasets(env_datasets) -> dict[str, Path]:
+    """Small datasets keyed by env id (see ``env_datasets`` in conftest.py)."""
+    return env_datasets
 
 
 def _backend_kwargs(env_id: str, backend: str, datasets: dict[str, Path]) -> dict:

@@ -14,50 +14,17 @@ import numpy as np
 import pytest
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.datasets import GridTaps, PerturbedTaps, collect
 from tactile_braille.envs import ENV_IDS
 from tactile_braille.envs.oracle import oracle_action
-from tactile_braille.rigs.virtual import VirtualRig
 
 SIMULATED_BACKENDS = ("dataset", "render")
 EPISODES = 20
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _cache_in_tmp(tmp_path_factory):
-    """Point the default-dataset cache at a session-wide temporary folder while this module runs."""
-    folder = tmp_path_factory.getbasetemp() / "tactile_braille_cache"
-    folder.mkdir(exist_ok=True)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("TACTILE_BRAILLE_DATA", str(folder))
-        yield folder
-
-
-def _collect_once(tmp_path_factory, name: str, procedure) -> Path:
-    """Collect ``procedure`` on the virtual rig into a session-wide folder (once per session)."""
-    folder = tmp_path_factory.getbasetemp() / "tactile_braille_env_datasets"
-    folder.mkdir(exist_ok=True)
-    path = folder / f"{name}.h5"
-    if not path.exists():
-        collect(VirtualRig(seed=0), procedure, path, seed=0, progress=False)
-    return path
-
-
 @pytest.fixture(scope="session")
-def oracle_datasets(tmp_path_factory) -> dict[str, Path]:
-    perturbed = _collect_once(tmp_path_factory, "perturbed-all-3", PerturbedTaps(keys="all", per_key=3))
-    arrows = _collect_once(
-        tmp_path_factory, "grid-arrows-4mm", GridTaps(keys="arrows", spacing_mm=4, depth_step_mm=3)
-    )
-    alphabet = _collect_once(
-        tmp_path_factory, "grid-alphabet-6mm", GridTaps(keys="alphabet", spacing_mm=6, depth_step_mm=3)
-    )
-    return {
-        "tactile_braille/DiscreteArrows-v0": perturbed,
-        "tactile_braille/DiscreteAlphabet-v0": perturbed,
-        "tactile_braille/ContinuousArrows-v0": arrows,
-        "tactile_braille/ContinuousAlphabet-v0": alphabet,
-    }
+def oracle_datasets(env_datasets) -> dict[str, Path]:
+    """Small datasets keyed by env id (see ``env_datasets`` in conftest.py)."""
+    return env_datasets
 
 
 def _mean_return(env, policy, episodes: int, first_seed: int) -> tuple[float, list[int]]:

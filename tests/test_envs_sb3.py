@@ -9,31 +9,14 @@ import numpy as np
 import pytest
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.datasets import PerturbedTaps, collect
-from tactile_braille.rigs.virtual import VirtualRig
 
 ENV_ID = "tactile_braille/DiscreteArrows-v0"
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _cache_in_tmp(tmp_path_factory):
-    """Point the default-dataset cache at a session-wide temporary folder while this module runs."""
-    folder = tmp_path_factory.getbasetemp() / "tactile_braille_cache"
-    folder.mkdir(exist_ok=True)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setenv("TACTILE_BRAILLE_DATA", str(folder))
-        yield folder
-
-
 @pytest.fixture(scope="session")
-def small_keys_dataset(tmp_path_factory) -> Path:
-    """3 perturbed taps per key (shared with the other ``test_envs_*`` modules)."""
-    folder = tmp_path_factory.getbasetemp() / "tactile_braille_env_datasets"
-    folder.mkdir(exist_ok=True)
-    path = folder / "perturbed-all-3.h5"
-    if not path.exists():
-        collect(VirtualRig(seed=0), PerturbedTaps(keys="all", per_key=3), path, seed=0, progress=False)
-    return path
+def small_keys_dataset(env_datasets) -> Path:
+    """3 perturbed taps per key (see ``env_datasets`` in conftest.py)."""
+    return env_datasets[ENV_ID]
 
 
 def test_dqn_with_her_learns_on_the_env(small_keys_dataset):
