@@ -249,7 +249,7 @@ def test_empty_csv_raises_dataset_error(tmp_path):
 
 
 def test_unknown_grid_frame_raises_value_error(recording, tmp_path):
-    with pytest.raises(ValueError, match="grid_frame"):
+    with pytest.raises(ValueError, match="no work frame 'numpad'"):
         import_original(recording["csv"], tmp_path / "out.h5", grid_frame="numpad", progress=False)
 
 

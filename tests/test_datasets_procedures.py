@@ -11,6 +11,7 @@ import pytest
 from tactile_braille.datasets.procedures import NONE_TAP_OFFSET_MM, GridTaps, PerturbedTaps, TapSpec
 from tactile_braille.keyboard.calibration import CALIBRATED_FRAMES, RIG_TAP_OFFSET_MM
 from tactile_braille.keyboard.layout import ALL_TASK_KEYS, ARROW_KEYS, NONE_KEY, KeyboardLayout
+from tactile_braille.rigs.virtual import VirtualRig
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +76,10 @@ def test_perturbation_bounds_are_respected(kb):
             cx, cy = kb.centre_mm(tap.label)
         dx.append(tap.x_mm - cx)
         dy.append(tap.y_mm - cy)
-        depth.append(tap.depth_mm)
+        if tap.label == NONE_KEY:
+            assert tap.depth_mm == 0.0  # NONE taps are made in the air
+        else:
+            depth.append(tap.depth_mm)
         yaw.append(tap.yaw_deg)
     dx, dy, depth, yaw = map(np.asarray, (dx, dy, depth, yaw))
     assert np.abs(dx).max() <= 1.0
@@ -106,14 +110,26 @@ def test_perturbation_ranges_are_configurable(kb):
     assert max(abs(tap.yaw_deg) for tap in taps) <= 2.0
 
 
-def test_none_taps_land_off_the_keys_beyond_q(kb):
+def test_none_taps_are_made_in_the_air_where_the_original_made_them(kb):
     procedure = PerturbedTaps(keys="arrows", per_key=4)
     q_x, q_y = kb.centre_mm("Q")
     none_taps = [tap for tap in all_taps(procedure, kb) if tap.label == NONE_KEY]
     assert len(none_taps) == 4
     for tap in none_taps:
         assert abs(tap.x_mm - (q_x - 20.0)) <= 1.0
-        assert abs(tap.y_mm - (q_y + 20.0)) <= 1.0
+        assert abs(tap.y_mm - (q_y - 20.0)) <= 1.0
+        assert tap.depth_mm == 0.0
+
+
+def test_none_taps_touch_nothing(kb):
+    rig = VirtualRig(seed=None)
+    procedure = PerturbedTaps(keys="arrows", per_key=2)
+    air = rig.tap(0.0, 0.0, 0.0).frame
+    for tap in all_taps(procedure, kb):
+        if tap.label == NONE_KEY:
+            sample = rig.tap(tap.x_mm, tap.y_mm, tap.depth_mm, 0.0)
+            assert sample.pressed_key is None
+            np.testing.assert_array_equal(sample.frame, air)
 
 
 def test_every_key_gets_the_same_perturbation_list(kb):

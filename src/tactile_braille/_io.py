@@ -32,6 +32,12 @@ def atomic_path(path: str | Path, fsync: bool = False) -> Iterator[Path]:
             with open(temporary, "rb") as raw:
                 os.fsync(raw.fileno())
         os.replace(temporary, path)
+        if fsync:  # make the rename itself durable
+            directory = os.open(path.parent, os.O_RDONLY)
+            try:
+                os.fsync(directory)
+            finally:
+                os.close(directory)
     finally:
         if temporary.exists():
             temporary.unlink()

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import matplotlib
+
+matplotlib.use("Agg")  # the command only writes files
+
 import argparse
 import sys
 import time
@@ -49,8 +53,9 @@ def _collect(args: argparse.Namespace) -> int:
     if args.procedure == "perturbed":
         procedure = PerturbedTaps(keys=args.keys, per_key=args.per_key, split=args.split, seed=args.seed)
     else:
-        keys = "alphabet" if args.keys == "all" else args.keys
-        procedure = GridTaps(keys=keys, spacing_mm=args.spacing_mm, depth_step_mm=args.depth_step_mm)
+        if args.keys == "all":
+            raise ValueError("a grid covers one task's work frame: choose --keys alphabet or --keys arrows")
+        procedure = GridTaps(keys=args.keys, spacing_mm=args.spacing_mm, depth_step_mm=args.depth_step_mm)
     start = time.perf_counter()
     with _make_rig(args) as rig:
         path = collect(rig, procedure, args.output, seed=args.seed, resume=args.resume)

@@ -135,11 +135,7 @@ def save_gallery(
     title: str,
     columns: int = 8,
 ) -> Path:
-    """Write tiles as a PNG grid (observation per tile, raw crop for the first
-    row) atomically, and return the path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+    """Write tiles as a PNG grid (the processed observation of each tile) atomically."""
     import matplotlib.pyplot as plt
 
     if not tiles:

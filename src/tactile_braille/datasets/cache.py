@@ -8,6 +8,7 @@ stale: it is regenerated (with a message), never silently reused.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import sys
@@ -35,7 +36,7 @@ DEFAULT_DATASETS: dict[str, Procedure] = {
 
 
 def data_dir() -> Path:
-    """The cache directory (created on demand)."""
+    """The cache directory (not created here; a generation creates it)."""
     configured = os.environ.get("TACTILE_BRAILLE_DATA")
     if configured:
         return Path(configured).expanduser()
@@ -60,6 +61,8 @@ def default_dataset(
     """
     path = default_dataset_path(name, sensor, seed)
     procedure = DEFAULT_DATASETS[name]
+    if isinstance(procedure, PerturbedTaps):
+        procedure = dataclasses.replace(procedure, seed=seed)  # the seed picks the poses too
     rig = VirtualRig(sensor=sensor)
     expected = dataset_metadata(rig, procedure, seed)
     if path.exists():

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tactile_braille import __version__
+from tactile_braille._version import __version__
 from tactile_braille.datasets.procedures import Procedure
 from tactile_braille.datasets.store import DatasetMetadata, DatasetWriter
 from tactile_braille.keyboard.layout import NONE_KEY
 from tactile_braille.rigs.base import Rig
 from tactile_braille.sensor.processing import process_frame
 
-GENERATOR_VERSION = f"{__version__}+samples1"
+GENERATOR_VERSION = f"{__version__}+samples2"
 """Version of the sample generator (procedures, rig model, renderer, processing).
 
 Bump the suffix whenever a change alters the samples a collection produces:

@@ -9,7 +9,7 @@ rendered frames. Poses become the keyboard frame:
   ``obj_pose`` plus the jitter ``pose_1`` (x), ``pose_2`` (y), ``pose_3``
   (depth offset, in [-1, 0] mm) and ``pose_6`` (yaw);
 * grid data (with ``tap_depth`` and ``pressed_buttons``) are in a task's work
-  frame, placed on the keyboard by ``CALIBRATED_FRAMES``; the rig added 2 mm
+  frame, placed on the keyboard by ``work_frame_origin_mm``; the rig added 2 mm
   to every ``tap_depth``.
 """
 
@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from tactile_braille.datasets.store import DatasetError, DatasetMetadata, DatasetWriter
-from tactile_braille.keyboard.calibration import CALIBRATED_FRAMES, RIG_TAP_OFFSET_MM
+from tactile_braille.keyboard.calibration import RIG_TAP_OFFSET_MM, work_frame_origin_mm
 from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout
 from tactile_braille.sensor.config import ImageProcessing
 from tactile_braille.sensor.processing import process_frame
@@ -58,6 +58,13 @@ def _parse_pose(text: str, source: object) -> list[float]:
     return values
 
 
+def _number(row: dict, column: str, source: object) -> float:
+    try:
+        return float(row[column])
+    except (TypeError, ValueError):
+        raise DatasetError(f"{source}: column {column} holds {row[column]!r}, not a number") from None
+
+
 def import_original(
     csv_path: str | Path,
     output: str | Path,
@@ -86,8 +93,8 @@ def import_original(
     csv_path = Path(csv_path)
     videos_dir = Path(videos_dir) if videos_dir is not None else csv_path.parent / "videos"
     processing = processing or ImageProcessing()
-    if grid_frame is not None and grid_frame not in CALIBRATED_FRAMES:
-        raise ValueError(f"grid_frame must be one of {sorted(CALIBRATED_FRAMES)} or None, got {grid_frame!r}")
+    if grid_frame is not None:
+        work_frame_origin_mm(grid_frame)  # validates the name
     with open(csv_path, newline="") as handle:
         rows = list(csv.DictReader(handle))
     required = {"sensor_video", "obj_lbl", "obj_pose"}
@@ -123,17 +130,17 @@ def import_original(
             source = f"{csv_path}, row {index + 2}"
             x, y, _z, _, _, yaw = _parse_pose(row["obj_pose"], source)
             if grid_frame:
-                frame = CALIBRATED_FRAMES[grid_frame]
-                x, y = frame.offset_x_mm + x, frame.offset_y_mm + y
-                depth = float(row["tap_depth"]) + RIG_TAP_OFFSET_MM
+                origin_x, origin_y = work_frame_origin_mm(grid_frame)
+                x, y = origin_x + x, origin_y + y
+                depth = _number(row, "tap_depth", source) + RIG_TAP_OFFSET_MM
                 pressed = row["pressed_buttons"]
                 label = pressed
                 yaw = 0.0
             else:
-                x += float(row["pose_1"])
-                y += float(row["pose_2"])
-                depth = SUPERVISED_TAP_DEPTH_MM + float(row["pose_3"])
-                yaw = float(row["pose_6"])
+                x += _number(row, "pose_1", source)
+                y += _number(row, "pose_2", source)
+                depth = SUPERVISED_TAP_DEPTH_MM + _number(row, "pose_3", source)
+                yaw = _number(row, "pose_6", source)
                 label, pressed = row["obj_lbl"], NONE_KEY
             for key in (label, pressed):
                 if key not in name_index:

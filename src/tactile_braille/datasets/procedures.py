@@ -17,13 +17,13 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from tactile_braille.keyboard.calibration import CALIBRATED_FRAMES, RIG_TAP_OFFSET_MM
+from tactile_braille.keyboard.calibration import RIG_TAP_OFFSET_MM, work_frame_origin_mm
 from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout, key_set
 
-NONE_TAP_OFFSET_MM = (-20.0, 20.0)
-"""Where NONE-class taps of :class:`PerturbedTaps` land relative to Q: off the
-keys, beyond the top-left corner of the alphabet (the original tapped the air
-or the case there)."""
+NONE_TAP_OFFSET_MM = (-20.0, -20.0)
+"""Where NONE-class taps of :class:`PerturbedTaps` are made, relative to Q (the
+original's position); they are made in the air (depth 0), touching nothing,
+as the original did 10 mm above the keys."""
 
 SPLIT_SEED_OFFSET = {"train": 0, "validation": 1_000_003}
 
@@ -57,7 +57,7 @@ class PerturbedTaps:
         split: ``"train"`` or ``"validation"``; the splits draw different perturbations.
         depth_mm: nominal tap depth below the work-frame origin (5 mm: 1.5 mm
             into the key tops, short of actuation).
-        include_none: add a NONE class of taps off the keys.
+        include_none: add a NONE class of taps in the air (depth 0, touching nothing).
         position_range_mm, depth_range_mm, yaw_range_deg: perturbation bounds.
         seed: seeds the perturbations.
     """
@@ -96,16 +96,16 @@ class PerturbedTaps:
         if not 0 <= index < len(self):
             raise IndexError(f"tap {index} out of range [0, {len(self)})")
         label = self.labels[index // self.per_key]
-        if label == NONE_KEY:
-            q_x, q_y = layout.centre_mm("Q")
-            x, y = q_x + NONE_TAP_OFFSET_MM[0], q_y + NONE_TAP_OFFSET_MM[1]
-        else:
-            x, y = layout.centre_mm(label)
         # The same perturbation list for every key, as in the original release.
         rng = np.random.default_rng([self.seed + SPLIT_SEED_OFFSET[self.split], index % self.per_key])
         dx, dy = rng.uniform(-self.position_range_mm, self.position_range_mm, 2)
         dz = rng.uniform(*self.depth_range_mm)
         yaw = rng.uniform(-self.yaw_range_deg, self.yaw_range_deg)
+        if label == NONE_KEY:
+            q_x, q_y = layout.centre_mm("Q")
+            x, y = q_x + NONE_TAP_OFFSET_MM[0], q_y + NONE_TAP_OFFSET_MM[1]
+            return TapSpec(index, x + dx, y + dy, 0.0, yaw, label)  # in the air
+        x, y = layout.centre_mm(label)
         return TapSpec(index, x + dx, y + dy, self.depth_mm + dz, yaw, label)
 
     def describe(self) -> dict:
@@ -201,11 +201,11 @@ class GridTaps:
         xs, ys, depths = self.axes
         i, rest = divmod(index, len(ys) * len(depths))
         j, k = divmod(rest, len(depths))
-        frame = CALIBRATED_FRAMES[self.keys]
+        origin_x, origin_y = work_frame_origin_mm(self.keys)
         return TapSpec(
             index,
-            xs[i] + frame.offset_x_mm,
-            ys[j] + frame.offset_y_mm,
+            xs[i] + origin_x,
+            ys[j] + origin_y,
             depths[k] + RIG_TAP_OFFSET_MM,
             0.0,
             "",

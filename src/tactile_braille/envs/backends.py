@@ -130,7 +130,8 @@ class RigBackend:
 
     Discrete moves tap at the cell's position with the paper's perturbations
     (x, y ~ U[-1, 1] mm, depth 5 mm + U[-1, 0], yaw ~ U[-10, 10] deg), a PRESS
-    goes 8 mm down, and NONE cells (off the keys) give a tap in the air.
+    goes 8 mm down (with the same perturbations, so 7-8 mm), and NONE cells
+    are tapped in the air (depth 0) and never press.
     Before every tap the rig is reseeded from the environment's generator,
     so the virtual rig is deterministic from the environment's seed.
 
@@ -141,6 +142,13 @@ class RigBackend:
     name = "rig"
 
     def __init__(self, rig: Rig) -> None:
+        from tactile_braille.envs.core import OBSERVATION_SIZE_PX
+
+        if rig.processing.size_px != OBSERVATION_SIZE_PX:
+            raise ValueError(
+                f"the environments take {OBSERVATION_SIZE_PX}x{OBSERVATION_SIZE_PX} observations; "
+                f"this rig's processing makes {rig.processing.size_px}x{rig.processing.size_px}"
+            )
         self.rig = rig
         self.layout = rig.layout
 

@@ -14,6 +14,7 @@ from tactile_braille.envs.core import BatchedBraille, compute_reward
 from tactile_braille.envs.rendering import top_view
 from tactile_braille.envs.tasks import Task
 from tactile_braille.rigs.base import Rig
+from tactile_braille.sensor.config import sensor_preset
 
 BACKENDS = ("dataset", "render", "rig")
 
@@ -59,7 +60,7 @@ class BrailleEnv(gym.Env):
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
         self.task = Task(keys=keys, continuous=self.continuous)
-        self.backend_name = backend
+        self._dome_radius_mm = sensor_preset(sensor).dome_diameter_mm / 2
         self._core = BatchedBraille(self.task, make_backend(self.task, backend, dataset, rig, sensor), 1)
         self.observation_space = self._core.observation_space()
         self.action_space = self._core.action_space()
@@ -78,12 +79,12 @@ class BrailleEnv(gym.Env):
 
         ``options={"goal_key": "Q"}`` fixes the goal instead.
         """
+        goal = (options or {}).get("goal_key")
+        if goal is not None and goal not in self.goal_keys:
+            raise ValueError(f"goal_key {goal!r} is not one of {self.goal_keys}")
         super().reset(seed=seed)
         self._core.reset(self._all, self.np_random)
-        if options and "goal_key" in options:
-            goal = options["goal_key"]
-            if goal not in self.goal_keys:
-                raise ValueError(f"goal_key {goal!r} is not one of {self.goal_keys}")
+        if goal is not None:
             self._core.goal[0] = self.goal_keys.index(goal)
         pose = self._core.sensor_pose_mm()[0]
         self._path_mm = [(pose[0], pose[1])]
@@ -153,7 +154,7 @@ class BrailleEnv(gym.Env):
             self._view_mm(),
             self.goal_keys[int(core.goal[0])],
             self._path_mm,
-            12.5,
+            self._dome_radius_mm,
             core.pressed_key(0),
             core.images[0],
         )

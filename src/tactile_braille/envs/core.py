@@ -20,6 +20,7 @@ from tactile_braille.envs.tasks import (
 from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout
 
 OBSERVATION_SIZE_PX = 100
+"""Side of the tactile observation (the paper's 100 x 100)."""
 
 # Moves of the discrete actions in (row, column) of the key grid; PRESS stays.
 _MOVES = np.array([(-1, 0), (1, 0), (0, -1), (0, 1), (0, 0)], dtype=np.int64)
@@ -30,7 +31,9 @@ def cell_positions_mm(task: Task, layout: KeyboardLayout) -> np.ndarray:
     """(rows, columns, 2) keyboard-frame position of each cell of the discrete key grid.
 
     Key cells sit at their key's centre (SPACE's six cells spread along the
-    bar); NONE cells continue their row's spacing (they are tapped in the air).
+    bar); NONE cells continue their row's spacing, which puts some over real
+    keys (SEMICOLON, RIGHTSHIFT, ...), but they are tapped in the air (depth 0)
+    and a PRESS there presses nothing.
     """
     grid = task.key_grid
     positions = np.zeros((*grid.shape, 2))
@@ -72,7 +75,6 @@ class BatchedBraille:
         self._goal_of_code = np.full(len(layout) + 1, -1, dtype=np.int64)
         for i, name in enumerate(self.goal_keys):
             self._goal_of_code[layout.key(name).index] = i
-        self._goal_codes = np.array([layout.key(k).index for k in self.goal_keys])
         grid = task.key_grid
         self.grid_codes = np.array(
             [[layout.key(k).index if k != NONE_KEY else -1 for k in row] for row in grid]
@@ -161,8 +163,10 @@ class BatchedBraille:
 
     def _discrete_taps(self, index: np.ndarray, press: np.ndarray, rng: np.random.Generator):
         r, c = self.cell[index, 0], self.cell[index, 1]
-        self.depth_mm[index] = np.where(press, PRESS_DEPTH_MM, MOVE_TAP_DEPTH_MM)
-        return self.backend.discrete_taps(self.grid_codes[r, c], press, self.cell_positions_mm[r, c], rng)
+        codes = self.grid_codes[r, c]
+        # NONE cells are tapped in the air (depth 0).
+        self.depth_mm[index] = np.where(codes < 0, 0.0, np.where(press, PRESS_DEPTH_MM, MOVE_TAP_DEPTH_MM))
+        return self.backend.discrete_taps(codes, press, self.cell_positions_mm[r, c], rng)
 
     # ------------------------------------------------------------- steps
     def check_actions(self, actions: np.ndarray) -> np.ndarray:

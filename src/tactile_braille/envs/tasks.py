@@ -11,11 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tactile_braille.keyboard.calibration import CALIBRATED_FRAMES, RIG_TAP_OFFSET_MM
+from tactile_braille._registration import MAX_EPISODE_STEPS  # noqa: F401 - re-exported
+from tactile_braille.keyboard.calibration import RIG_TAP_OFFSET_MM, work_frame_origin_mm
 from tactile_braille.keyboard.layout import NONE_KEY, key_set
-
-MAX_EPISODE_STEPS = 25
-"""Episode cut (the registry's ``max_episode_steps``), as in the paper."""
 
 DISCRETE_ACTIONS: tuple[str, ...] = ("UP", "DOWN", "LEFT", "RIGHT", "PRESS")
 """Discrete actions: move to the neighbouring cell of the key grid, or press."""
@@ -85,8 +83,7 @@ class Task:
     @property
     def frame_origin_mm(self) -> tuple[float, float]:
         """Keyboard-frame position of the continuous work frame's origin."""
-        frame = CALIBRATED_FRAMES[self.keys]
-        return frame.offset_x_mm, frame.offset_y_mm
+        return work_frame_origin_mm(self.keys)
 
     @property
     def action_size(self) -> int:

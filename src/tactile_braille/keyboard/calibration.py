@@ -83,6 +83,21 @@ CALIBRATED_FRAMES: dict[str, FrameTransform] = {
 """Fitted placement of each real map's work frame (with :class:`SwitchModel` defaults)."""
 
 
+def work_frame_origin_mm(name: str) -> tuple[float, float]:
+    """Keyboard-frame origin of a continuous task's work frame (``"alphabet"`` or ``"arrows"``).
+
+    The translation of the calibrated frame: its fitted yaw (0.13 and 0.20 deg,
+    under 0.3 mm at the workspace's edge) is left out so that work-frame grids
+    stay aligned with the keyboard frame; its clearance and tilt describe the
+    real rig's frame, not the virtual rig's (which sits at the nominal 3.5 mm).
+    """
+    try:
+        frame = CALIBRATED_FRAMES[name]
+    except KeyError:
+        raise ValueError(f"no work frame {name!r}; choose one of {sorted(CALIBRATED_FRAMES)}") from None
+    return frame.offset_x_mm, frame.offset_y_mm
+
+
 @dataclass(frozen=True)
 class Agreement:
     """How often a model's outcome matches the robot's.

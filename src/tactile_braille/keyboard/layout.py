@@ -14,10 +14,9 @@ Centres follow from the standard key unit (1 u = 19.05 mm nominal; the rig's
 code and this model use 19 mm) and the ANSI key widths, which reproduce the
 centres listed in the paper's released code: the arrow block UP (38, -237.5),
 DOWN (57, -237.5), LEFT (57, -218.5), RIGHT (57, -256.5) exactly, and SPACE at
-(57, -92.625), which the code rounds to (57, -92.5). The released code rounds the row stagger of the A and Z
-rows to 5 and 14 mm; the ANSI widths give 4.75 and 14.25 mm, which is what
-this model uses (the calibration in :mod:`tactile_braille.keyboard.switch`
-compares both).
+(57, -92.625), which the code rounds to (57, -92.5). The released code
+rounds the row stagger of the A and Z rows to 5 and 14 mm; the ANSI widths
+give 4.75 and 14.25 mm, which is what this model uses.
 """
 
 from __future__ import annotations

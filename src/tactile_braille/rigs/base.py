@@ -7,9 +7,8 @@ origin, ``clearance_mm`` above the key tops (3.5 mm on the paper's rig), so
 the sensor first touches a key top at ``depth_mm = clearance_mm``.
 
 A real arm (the UR5 rig of a later issue) implements the same protocol: it
-moves at a safe height between taps, reports its own latency, and raises
-:class:`RigError` on faults, so that a collection or an episode can stop
-cleanly and resume.
+moves at a safe height between taps and raises :class:`RigError` on faults,
+so that a collection or an episode can stop cleanly and resume.
 """
 
 from __future__ import annotations

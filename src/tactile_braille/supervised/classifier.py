@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import json
+import pickle
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -187,7 +188,10 @@ def train_classifier(
         total = 0.0
         for start in range(0, len(order), config.batch_size):
             batch = order[start : start + config.batch_size]
-            logits = model(_augment(train_images[batch], config, generator))
+            images = train_images[batch]
+            if config.max_shift or config.max_zoom:
+                images = _augment(images, config, generator)
+            logits = model(images)
             loss = F.cross_entropy(logits, train_labels[batch])
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
@@ -267,9 +271,9 @@ def load_classifier(folder: str | Path) -> tuple[KeyClassifier, ClassifierConfig
         fields["classes"] = tuple(fields["classes"])
         config = ClassifierConfig(**fields)
         state = torch.load(folder / MODEL_FILE, map_location="cpu", weights_only=True)
-    except (OSError, KeyError, TypeError, ValueError) as error:
+        model = KeyClassifier(len(config.classes), config.dropout)
+        model.load_state_dict(state)
+    except (OSError, KeyError, TypeError, ValueError, RuntimeError, pickle.UnpicklingError) as error:
         raise ValueError(f"{folder} does not hold a saved classifier: {error}") from None
-    model = KeyClassifier(len(config.classes), config.dropout)
-    model.load_state_dict(state)
     model.eval()
     return model, config

@@ -26,9 +26,6 @@ def save_confusion_matrix(
     matrix: np.ndarray, classes: tuple[str, ...], output: str | Path, title: str
 ) -> Path:
     """Write the confusion matrix (rows: true key, columns: predicted) as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from tactile_braille.gallery import save_figure
