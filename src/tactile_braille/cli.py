@@ -139,6 +139,24 @@ def _classify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train(args: argparse.Namespace) -> int:
+    from tactile_braille.agents.train import TrainConfig, train
+
+    if args.resume is not None:
+        run = train(run_dir=args.resume, resume=True)
+    else:
+        if args.task is None:
+            raise ValueError("give a TASK (an environment id) or --resume RUN_DIR")
+        task = args.task if "/" in args.task else f"tactile_braille/{args.task}"
+        config = TrainConfig(
+            task=task, algo=args.algo, seed=args.seed, epochs=args.epochs, backend=args.backend,
+            device=args.device, her=not args.no_her,
+        )  # fmt: skip
+        run = train(config, run_dir=args.run_dir)
+    print(f"run folder: {run}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tactile-braille``."""
     parser = argparse.ArgumentParser(
@@ -189,6 +207,18 @@ def build_parser() -> argparse.ArgumentParser:
     classify.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
     classify.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     classify.set_defaults(handler=_classify)
+
+    trainer = commands.add_parser("train", help="train an agent on a task (checkpointed, resumable)")
+    trainer.add_argument("task", nargs="?", help="environment id, e.g. DiscreteArrows-v0")
+    trainer.add_argument("algo", nargs="?", default="dqn", choices=("dqn",))
+    trainer.add_argument("--seed", type=int, default=0)
+    trainer.add_argument("--epochs", type=int, default=25)
+    trainer.add_argument("--backend", choices=("dataset", "render"), default="dataset")
+    trainer.add_argument("--device", default="cpu", help="cpu or cuda")
+    trainer.add_argument("--no-her", action="store_true", help="turn hindsight relabelling off")
+    trainer.add_argument("--run-dir", type=Path, default=None, help="run folder (default: runs/...)")
+    trainer.add_argument("--resume", type=Path, default=None, metavar="RUN_DIR", help="continue a run")
+    trainer.set_defaults(handler=_train)
 
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
     data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))

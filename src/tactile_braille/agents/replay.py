@@ -1,0 +1,179 @@
+"""Episode replay with the paper's Hindsight Experience Replay, storing each image once.
+
+Images are bit-packed (100x100 binary -> 1,250 bytes) in a ring of *frames*;
+transitions only hold the indices of their two frames, so an image shared by
+two transitions, or by a transition and its hindsight copy, is stored once.
+
+HER as released with the paper: when an episode ends because a WRONG key was
+pressed, every transition of the episode is stored again with the pressed key
+as the goal and the final reward set to 1. Time-outs are not relabelled (the
+achieved goal exists only at the final step, so the usual 'future' strategy
+does not apply). ``her=False`` turns it off.
+
+Memory at the paper's capacity of 100,000 transitions: the frame ring holds
+twice as many frames as transitions (episodes of one step need two frames
+per transition), 200,000 x 1,250 bytes = 250 MB, plus about 60 bytes per
+transition.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from tactile_braille._io import atomic_path
+
+PACKED_BYTES = 100 * 100 // 8
+
+
+class EpisodeReplayBuffer:
+    """Transitions of goal-conditioned episodes, with hindsight relabelling.
+
+    Args:
+        capacity: transitions kept (the oldest are overwritten).
+        goal_size: length of the goal one-hots.
+        action_shape: shape of one action (``()`` for discrete).
+        previous_action_size: length of the previous-action vector.
+        her: relabel episodes that ended with a wrong press.
+    """
+
+    def __init__(
+        self,
+        capacity: int,
+        goal_size: int,
+        action_shape: tuple[int, ...],
+        previous_action_size: int,
+        her: bool = True,
+    ) -> None:
+        if capacity < 1:
+            raise ValueError(f"capacity must be at least 1, got {capacity}")
+        self.capacity = int(capacity)
+        self.her = her
+        self.frame_capacity = 2 * self.capacity
+        self.frames = np.zeros((self.frame_capacity, PACKED_BYTES), dtype=np.uint8)
+        self.frame_index = np.zeros((self.capacity, 2), dtype=np.int64)  # (this, next)
+        self.previous_actions = np.zeros((self.capacity, 2, previous_action_size), dtype=np.float32)
+        self.goals = np.zeros((self.capacity, goal_size), dtype=np.float32)
+        action_dtype = np.int64 if action_shape == () else np.float32
+        self.actions = np.zeros((self.capacity, *action_shape), dtype=action_dtype)
+        self.rewards = np.zeros(self.capacity, dtype=np.float32)
+        self.dones = np.zeros(self.capacity, dtype=np.float32)
+        self.next_frame = 0
+        self.frames_written = 0
+        self.next_slot = 0
+        self.size = 0
+        self._episode: list[dict] = []
+        self._current_frame = -1
+        self._current_previous_action: np.ndarray | None = None
+
+    # --------------------------------------------------------- writing
+    def _store_frame(self, image: np.ndarray) -> int:
+        slot = self.next_frame
+        self.frames[slot] = np.packbits(np.asarray(image).reshape(-1) > 127)
+        self.next_frame = (self.next_frame + 1) % self.frame_capacity
+        self.frames_written += 1
+        return slot
+
+    def start_episode(self, observation: dict[str, np.ndarray]) -> None:
+        """Store an episode's first observation."""
+        self._episode = []
+        self._current_frame = self._store_frame(observation["observation"])
+        self._current_previous_action = np.asarray(observation["previous_action"], dtype=np.float32)
+
+    def add_step(
+        self, action, reward: float, next_observation: dict[str, np.ndarray], terminated: bool
+    ) -> None:
+        """Record one step of the episode in progress (goal = its desired goal)."""
+        if self._current_frame < 0:
+            raise RuntimeError("call start_episode before add_step")
+        next_frame = self._store_frame(next_observation["observation"])
+        next_previous = np.asarray(next_observation["previous_action"], dtype=np.float32)
+        self._episode.append(
+            {
+                "frames": (self._current_frame, next_frame),
+                "previous": (self._current_previous_action, next_previous),
+                "goal": np.asarray(next_observation["desired_goal"], dtype=np.float32),
+                "action": action,
+                "reward": float(reward),
+                "done": float(terminated),
+                "achieved": np.asarray(next_observation["achieved_goal"], dtype=np.float32),
+            }
+        )
+        self._current_frame, self._current_previous_action = next_frame, next_previous
+
+    def end_episode(self) -> None:
+        """Commit the episode's transitions, and their hindsight copies (HER)."""
+        for step in self._episode:
+            self._add(step, step["goal"], step["reward"])
+        if self.her and self._episode:
+            last = self._episode[-1]
+            wrong_press = last["achieved"].any() and not np.array_equal(last["achieved"], last["goal"])
+            if wrong_press:
+                for i, step in enumerate(self._episode):
+                    self._add(step, last["achieved"], 1.0 if i == len(self._episode) - 1 else 0.0)
+        self._episode = []
+        self._current_frame = -1
+
+    def _add(self, step: dict, goal: np.ndarray, reward: float) -> None:
+        slot = self.next_slot
+        self.frame_index[slot] = step["frames"]
+        self.previous_actions[slot, 0] = step["previous"][0]
+        self.previous_actions[slot, 1] = step["previous"][1]
+        self.goals[slot] = goal
+        self.actions[slot] = step["action"]
+        self.rewards[slot] = reward
+        self.dones[slot] = step["done"]
+        self.next_slot = (self.next_slot + 1) % self.capacity
+        self.size = min(self.size + 1, self.capacity)
+
+    # --------------------------------------------------------- reading
+    def _images(self, frames: np.ndarray) -> np.ndarray:
+        bits = np.unpackbits(self.frames[frames], axis=-1)
+        return (bits.reshape(len(frames), 1, 100, 100) * 255).astype(np.uint8)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """A uniform batch of transitions (images as (B, 1, 100, 100) uint8)."""
+        if self.size == 0:
+            raise RuntimeError("the replay buffer is empty")
+        index = rng.integers(self.size, size=batch_size)
+        frames = self.frame_index[index]
+        return {
+            "images": self._images(frames[:, 0]),
+            "previous_actions": self.previous_actions[index, 0],
+            "goals": self.goals[index],
+            "actions": self.actions[index],
+            "rewards": self.rewards[index],
+            "next_images": self._images(frames[:, 1]),
+            "next_previous_actions": self.previous_actions[index, 1],
+            "dones": self.dones[index],
+        }
+
+    # ------------------------------------------------------ checkpoints
+    _ARRAYS = ("frames", "frame_index", "previous_actions", "goals", "actions", "rewards", "dones")
+
+    def save(self, path: str | Path) -> None:
+        """Write the used part of the buffer (committed transitions) atomically as ``.npz``."""
+        frames = min(self.frames_written, self.frame_capacity)
+        arrays = {name: getattr(self, name)[: self.size] for name in self._ARRAYS if name != "frames"}
+        with atomic_path(path, fsync=True) as temporary, open(temporary, "wb") as handle:
+            np.savez(
+                handle,
+                counters=np.array([self.next_frame, self.frames_written, self.next_slot, self.size]),
+                frames=self.frames[:frames],
+                **arrays,
+            )
+
+    def load(self, path: str | Path) -> None:
+        """Restore a buffer written by :meth:`save` (same capacity and sizes)."""
+        with np.load(path) as data:
+            for name in self._ARRAYS:
+                stored, mine = data[name], getattr(self, name)
+                if stored.shape[1:] != mine.shape[1:] or len(stored) > len(mine):
+                    raise ValueError(f"{path}: {name} of shape {stored.shape} does not fit {mine.shape}")
+                mine[: len(stored)] = stored
+            self.next_frame, self.frames_written, self.next_slot, self.size = (
+                int(v) for v in data["counters"]
+            )
+        self._episode = []
+        self._current_frame = -1
