@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from tactile_braille.datasets.collector import GENERATOR_VERSION, collect, dataset_metadata
-from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps, Procedure
+from tactile_braille.datasets.procedures import SPLIT_SEED_OFFSET, GridTaps, PerturbedTaps, Procedure
 from tactile_braille.datasets.store import (
     DatasetError,
     ResumeMismatchError,
@@ -61,10 +61,13 @@ def default_dataset(
     """
     path = default_dataset_path(name, sensor, seed)
     procedure = DEFAULT_DATASETS[name]
+    collection_seed = seed
     if isinstance(procedure, PerturbedTaps):
         procedure = dataclasses.replace(procedure, seed=seed)  # the seed picks the poses too
+        # Each split draws its own sensor noise, not the other split's.
+        collection_seed = seed + SPLIT_SEED_OFFSET[procedure.split]
     rig = VirtualRig(sensor=sensor)
-    expected = dataset_metadata(rig, procedure, seed)
+    expected = dataset_metadata(rig, procedure, collection_seed)
     if path.exists():
         try:
             dataset = load_dataset(path)
@@ -81,10 +84,10 @@ def default_dataset(
         path.unlink()
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        collect(rig, procedure, path, seed=seed, resume=True, progress=progress)
+        collect(rig, procedure, path, seed=collection_seed, resume=True, progress=progress)
     except ResumeMismatchError as error:
         # An interrupted generation by another version or with other settings.
         print(f"tactile_braille: discarding a stale interrupted generation ({error})", file=sys.stderr)
         shutil.rmtree(partial_path(path))
-        collect(rig, procedure, path, seed=seed, resume=False, progress=progress)
+        collect(rig, procedure, path, seed=collection_seed, resume=False, progress=progress)
     return load_dataset(path)
