@@ -173,3 +173,31 @@ def test_resume_after_kill_completes_every_epoch_once(env_datasets, tmp_path):
     assert steps == [60, 120, 180, 240]  # nothing counted twice, nothing lost before the checkpoint
     with pytest.raises(FileExistsError):
         train(TrainConfig(dataset=dataset), run_dir=run_dir, progress=False)
+
+
+def test_discrete_sac_trains_checkpoints_and_resumes(env_datasets, tmp_path):
+    """A short discrete-SAC run: finite losses logged, a checkpoint that resumes to more epochs."""
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+    config = TrainConfig(
+        algo="sac_discrete", epochs=1, steps_per_epoch=60, start_steps=20, updates_per_step=1,
+        test_episodes=2, replay_capacity=2000, dataset=dataset, threads=1,
+    )  # fmt: skip
+    run = train(config, run_dir=tmp_path / "run", progress=False)
+    (row,) = read_progress(run)
+    for name in ("losses/qf_loss", "losses/actor_loss", "losses/alpha", "losses/entropy"):
+        assert np.isfinite(float(row[name])), name
+    assert 0.0 < float(row["losses/entropy"]) <= np.log(5) + 1e-6
+    config_file = run / "config.json"
+    data = json.loads(config_file.read_text())
+    assert data["agent"]["gamma"] == 0.6  # the paper's discount for discrete SAC
+    data["epochs"] = 2
+    config_file.write_text(json.dumps(data))
+    train(run_dir=run, resume=True, progress=False)
+    assert [int(r["epoch"]) for r in read_progress(run)] == [0, 1]
+
+
+def test_agent_config_must_match_the_algorithm():
+    from tactile_braille.agents import DQNConfig
+
+    with pytest.raises(ValueError, match="sac_discrete takes a DiscreteSACConfig"):
+        TrainConfig(algo="sac_discrete", agent=DQNConfig())

@@ -210,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     trainer = commands.add_parser("train", help="train an agent on a task (checkpointed, resumable)")
     trainer.add_argument("task", nargs="?", help="environment id, e.g. DiscreteArrows-v0")
-    trainer.add_argument("algo", nargs="?", default="dqn", choices=("dqn",))
+    trainer.add_argument("algo", nargs="?", default="dqn", choices=("dqn", "sac_discrete"))
     trainer.add_argument("--seed", type=int, default=0)
     trainer.add_argument("--epochs", type=int, default=25)
     trainer.add_argument("--backend", choices=("dataset", "render"), default="dataset")

@@ -82,6 +82,10 @@ class DQNAgent:
         previous = self._tensor(observation["previous_action"][None])
         return int(self.q(image, goal, previous).argmax(dim=-1).item())
 
+    def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator) -> int:
+        """Epsilon-greedy (the paper's schedule) while exploring, greedy otherwise."""
+        return self.act(observation, self.epsilon(step) if explore else 0.0, rng)
+
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One gradient step on a batch from the replay buffer; returns losses."""
         t = {name: self._tensor(value) for name, value in batch.items()}

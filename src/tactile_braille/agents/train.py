@@ -25,11 +25,15 @@ from tactile_braille._io import atomic_path
 from tactile_braille._registration import ENV_IDS
 from tactile_braille.agents.dqn import DQNAgent, DQNConfig
 from tactile_braille.agents.replay import EpisodeReplayBuffer
+from tactile_braille.agents.sac_discrete import DiscreteSACAgent, DiscreteSACConfig
 
-ALGORITHMS = ("dqn",)
+AGENTS = {"dqn": (DQNAgent, DQNConfig), "sac_discrete": (DiscreteSACAgent, DiscreteSACConfig)}
+"""Implemented algorithms: the agent class and its hyperparameter dataclass."""
+ALGORITHMS = tuple(AGENTS)
 PROGRESS_FIELDS = (
     "epoch", "env_steps", "updates", "train/episodes", "train/episodic_return", "test/episodic_return",
-    "test/episode_length", "losses/q_loss", "losses/q_values", "charts/epsilon", "charts/SPS", "time_s",
+    "test/episode_length", "losses/q_loss", "losses/q_values", "losses/qf_loss", "losses/actor_loss",
+    "losses/alpha", "losses/entropy", "charts/SPS", "time_s",
 )  # fmt: skip
 
 
@@ -39,7 +43,7 @@ class TrainConfig:
 
     Attributes:
         task: environment id (``tactile_braille/DiscreteArrows-v0``...).
-        algo: ``"dqn"`` (double + dueling).
+        algo: ``"dqn"`` (double + dueling) or ``"sac_discrete"``.
         seed: seeds networks, exploration, environments.
         epochs: epochs to run.
         steps_per_epoch: environment steps per epoch (250).
@@ -52,7 +56,7 @@ class TrainConfig:
         dataset: dataset path for the dataset backend (default: the cached one).
         device: torch device.
         threads: torch CPU threads.
-        agent: the algorithm's hyperparameters.
+        agent: the algorithm's hyperparameters (default: the paper's for ``algo``).
     """
 
     task: str = "tactile_braille/DiscreteArrows-v0"
@@ -69,11 +73,16 @@ class TrainConfig:
     dataset: str | None = None
     device: str = "cpu"
     threads: int = 2
-    agent: DQNConfig = dataclasses.field(default_factory=DQNConfig)
+    agent: DQNConfig | DiscreteSACConfig | None = None
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; implemented: {ALGORITHMS}")
+        config_class = AGENTS[self.algo][1]
+        if self.agent is None:
+            object.__setattr__(self, "agent", config_class())
+        elif not isinstance(self.agent, config_class):
+            raise ValueError(f"{self.algo} takes a {config_class.__name__}, got {type(self.agent).__name__}")
         if self.task not in gym.registry:
             raise ValueError(f"unknown task {self.task!r}; choose one of {ENV_IDS}")
         if "Continuous" in self.task:
@@ -88,7 +97,7 @@ class TrainConfig:
     @classmethod
     def from_json(cls, data: dict) -> TrainConfig:
         data = dict(data)
-        data["agent"] = DQNConfig(**data["agent"])
+        data["agent"] = AGENTS[data["algo"]][1](**data["agent"])
         return cls(**data)
 
 
@@ -99,7 +108,7 @@ def _make_env(config: TrainConfig) -> gym.Env:
     return gym.make(config.task, **kwargs)
 
 
-def evaluate(agent: DQNAgent, env: gym.Env, episodes: int, seed: int) -> tuple[float, float]:
+def evaluate(agent, env: gym.Env, episodes: int, seed: int) -> tuple[float, float]:
     """Mean return and length of deterministic (greedy) episodes."""
     rng = np.random.default_rng(seed)
     returns, lengths = [], []
@@ -107,7 +116,8 @@ def evaluate(agent: DQNAgent, env: gym.Env, episodes: int, seed: int) -> tuple[f
         observation, _ = env.reset(seed=seed + episode)
         total, steps, done = 0.0, 0, False
         while not done:
-            observation, reward, terminated, truncated, _ = env.step(agent.act(observation, 0.0, rng))
+            action = agent.policy_action(observation, 0, explore=False, rng=rng)
+            observation, reward, terminated, truncated, _ = env.step(action)
             total, steps, done = total + reward, steps + 1, terminated or truncated
         returns.append(total)
         lengths.append(steps)
@@ -144,7 +154,8 @@ def train(
     spaces = env.observation_space
     goal_size = spaces["desired_goal"].shape[0]
     previous_size = spaces["previous_action"].shape[0]
-    agent = DQNAgent(env.action_space.n, goal_size, previous_size, config.agent, config.device)
+    agent_class = AGENTS[config.algo][0]
+    agent = agent_class(env.action_space.n, goal_size, previous_size, config.agent, config.device)
     buffer = EpisodeReplayBuffer(config.replay_capacity, goal_size, (), previous_size, her=config.her)
     rng = np.random.default_rng(config.seed)
     torch.manual_seed(config.seed)
@@ -164,11 +175,10 @@ def train(
     for epoch in range(start_epoch, config.epochs):
         started = time.perf_counter()
         for _ in range(config.steps_per_epoch):
-            epsilon = agent.epsilon(env_steps)
             if env_steps < config.start_steps:
                 action = int(rng.integers(env.action_space.n))
             else:
-                action = agent.act(observation, epsilon, rng)
+                action = agent.policy_action(observation, env_steps, explore=True, rng=rng)
             observation, reward, terminated, truncated, _ = env.step(action)
             buffer.add_step(action, reward, observation, terminated)
             episode_return += reward
@@ -189,10 +199,7 @@ def train(
             "epoch": epoch, "env_steps": env_steps, "updates": updates, "train/episodes": len(recent_returns),
             "train/episodic_return": float(np.mean(recent_returns)) if recent_returns else float("nan"),
             "test/episodic_return": test_return, "test/episode_length": test_length,
-            "losses/q_loss": losses.get("losses/q_loss", float("nan")),
-            "losses/q_values": losses.get("losses/q_values", float("nan")),
-            "charts/epsilon": agent.epsilon(env_steps), "charts/SPS": config.steps_per_epoch / elapsed,
-            "time_s": elapsed,
+            **losses, "charts/SPS": config.steps_per_epoch / elapsed, "time_s": elapsed,
         }  # fmt: skip
         recent_returns = []
         _append_progress(run_dir / "progress.csv", row)
@@ -220,6 +227,6 @@ def _append_progress(path: Path, row: dict) -> None:
             rows = [r for r in csv.DictReader(handle) if int(r["epoch"]) < row["epoch"]]
     rows.append(row)
     with atomic_path(path) as temporary, open(temporary, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS)
+        writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS, restval="")
         writer.writeheader()
         writer.writerows(rows)
