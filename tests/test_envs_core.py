@@ -19,6 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import tactile_braille  # noqa: F401 - registers the environments
+from envs_helpers import assert_same
 from tactile_braille.datasets import default_dataset_path
 from tactile_braille.envs import ENV_IDS, MAX_EPISODE_STEPS
 from tactile_braille.envs.continuous import ContinuousBrailleEnv
@@ -83,25 +84,6 @@ def _rollout(env, seed: int, actions: list, reset_first: bool = True) -> list[tu
         if terminated or truncated:
             records.append(env.reset())
     return records
-
-
-def _assert_same(left, right, where: str = "") -> None:
-    """Recursive equality of outputs: dicts, tuples, arrays (exact) and scalars."""
-    if isinstance(left, dict):
-        assert isinstance(right, dict), where
-        assert left.keys() == right.keys(), where
-        for key in left:
-            _assert_same(left[key], right[key], f"{where}[{key!r}]")
-    elif isinstance(left, (tuple, list)):
-        assert len(left) == len(right), where
-        for i, (a, b) in enumerate(zip(left, right, strict=True)):
-            _assert_same(a, b, f"{where}[{i}]")
-    elif isinstance(left, np.ndarray):
-        assert isinstance(right, np.ndarray), where
-        assert left.dtype == right.dtype, where
-        np.testing.assert_array_equal(left, right, err_msg=where)
-    else:
-        assert left == right, f"{where}: {left!r} != {right!r}"
 
 
 def _one_hot(index: int, size: int) -> np.ndarray:
@@ -172,7 +154,7 @@ def test_same_seed_gives_identical_rollouts(env_id, backend, make):
     actions = _actions(env_id, 40)
     first = _rollout(make(env_id, backend), seed=11, actions=actions)
     second = _rollout(make(env_id, backend), seed=11, actions=actions)
-    _assert_same(first, second)
+    assert_same(first, second)
     # The episodes do end (the comparison spans resets) and rewards are seen.
     assert len(first) > len(actions) + 1
 
@@ -184,7 +166,7 @@ def test_reseeding_the_same_env_repeats_the_episode(env_id, backend, make):
     actions = _actions(env_id, 10, seed=5)
     first = _rollout(env, seed=3, actions=actions)
     second = _rollout(env, seed=3, actions=actions)
-    _assert_same(first, second)
+    assert_same(first, second)
 
 
 @pytest.mark.parametrize("backend", SIMULATED_BACKENDS)
@@ -208,7 +190,7 @@ def test_pickled_env_continues_identically(env_id, backend, make):
     _rollout(env, seed=21, actions=_actions(env_id, 3, seed=1))
     clone = pickle.loads(pickle.dumps(env))
     actions = _actions(env_id, 30, seed=2)
-    _assert_same(
+    assert_same(
         _rollout(env, seed=0, actions=actions, reset_first=False),
         _rollout(clone, seed=0, actions=actions, reset_first=False),
     )
@@ -258,15 +240,15 @@ def test_mutating_returned_arrays_does_not_change_later_ones(env_id, backend, ma
         info["sensor_pose_mm"][...] = -1.0
 
     first, clean_first = mutated.reset(seed=8), clean.reset(seed=8)
-    _assert_same(first, clean_first)
+    assert_same(first, clean_first)
     scribble(*first)
     for action in actions:
         out, clean_out = mutated.step(action), clean.step(action)
-        _assert_same(out, clean_out)
+        assert_same(out, clean_out)
         scribble(out[0], out[4])
         if out[2] or out[3]:
             out, clean_out = mutated.reset(), clean.reset()
-            _assert_same(out, clean_out)
+            assert_same(out, clean_out)
             scribble(*out)
 
 
@@ -495,12 +477,12 @@ def test_continuous_previous_action_is_zero_then_the_clipped_action(env_id, back
 @pytest.mark.parametrize("env_id", CONTINUOUS_IDS)
 def test_continuous_actions_beyond_bounds_are_clipped(env_id, backend, make):
     clipped_env, bounded_env = make(env_id, backend), make(env_id, backend)
-    _assert_same(clipped_env.reset(seed=6), bounded_env.reset(seed=6))
+    assert_same(clipped_env.reset(seed=6), bounded_env.reset(seed=6))
     wild = np.array([3.0, -7.5, 0.5], dtype=np.float32)
     bounded = np.array([1.0, -1.0, 0.5], dtype=np.float32)
     out, bounded_out = clipped_env.step(wild), bounded_env.step(bounded)
     np.testing.assert_array_equal(out[0]["previous_action"], bounded)
-    _assert_same(out, bounded_out)
+    assert_same(out, bounded_out)
     assert out[4]["sensor_pose_mm"][2] == pytest.approx(6.5)  # depth 5 + 3 * 0.5 mm
 
 
@@ -673,7 +655,7 @@ def test_rig_backend_needs_a_rig_and_drives_the_one_given(env_id, make):
     rig_env = gym.make(env_id, backend="rig", rig=VirtualRig())
     render_env = make(env_id, "render")
     actions = _actions(env_id, 15, seed=8)
-    _assert_same(_rollout(rig_env, seed=9, actions=actions), _rollout(render_env, seed=9, actions=actions))
+    assert_same(_rollout(rig_env, seed=9, actions=actions), _rollout(render_env, seed=9, actions=actions))
     rig_env.close()
 
 

@@ -16,6 +16,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 import tactile_braille  # noqa: F401 - registers the environments
+from envs_helpers import assert_same
 from tactile_braille.envs import ENV_IDS, MAX_EPISODE_STEPS
 from tactile_braille.envs.core import compute_reward
 from tactile_braille.envs.tasks import DISCRETE_ACTIONS
@@ -68,23 +69,6 @@ def _non_press_batch(env_id: str, t: int, num_envs: int = N) -> np.ndarray:
         return np.full(num_envs, (UP, LEFT, DOWN, RIGHT)[t % 4])
     action = [0.3 * (-1) ** t, 0.3 * (-1) ** (t // 2), -1.0]
     return np.tile(np.array(action, dtype=np.float32), (num_envs, 1))
-
-
-def _assert_same(left, right, where: str = "") -> None:
-    if isinstance(left, dict):
-        assert left.keys() == right.keys(), where
-        for key in left:
-            _assert_same(left[key], right[key], f"{where}[{key!r}]")
-    elif isinstance(left, (tuple, list)):
-        assert len(left) == len(right), where
-        for i, (a, b) in enumerate(zip(left, right, strict=True)):
-            _assert_same(a, b, f"{where}[{i}]")
-    elif isinstance(left, np.ndarray):
-        assert isinstance(right, np.ndarray), where
-        assert left.dtype == right.dtype, where
-        np.testing.assert_array_equal(left, right, err_msg=where)
-    else:
-        assert left == right, f"{where}: {left!r} != {right!r}"
 
 
 def _expected_previous_action(env_id: str, actions: np.ndarray) -> np.ndarray:
@@ -267,7 +251,7 @@ def test_same_seed_same_batch_rollout(env_id, make_vec):
         return records
 
     first, second = run(make_vec(env_id)), run(make_vec(env_id))
-    _assert_same(first, second)
+    assert_same(first, second)
     assert any(record[2].any() for record in first[1:])  # episodes ended (and were reset) on the way
 
 
@@ -316,12 +300,12 @@ def test_returned_arrays_never_share_memory_and_can_be_mutated(env_id, make_vec)
     arrays = []
     out, clean_out = mutated.reset(seed=1), clean.reset(seed=1)
     for action in _batch_actions(env_id, 8, seed=6):
-        _assert_same(out, clean_out)
+        assert_same(out, clean_out)
         arrays += list(out[0].values())
         for value in out[0].values():
             value[...] = 3 if value.dtype == np.uint8 else 0.25
         out, clean_out = mutated.step(action), clean.step(action)
-    _assert_same(out, clean_out)
+    assert_same(out, clean_out)
     arrays += list(out[0].values())
     for i, a in enumerate(arrays):
         for b in arrays[i + 1 :]:
@@ -369,7 +353,7 @@ def test_batch_actions_beyond_bounds_are_clipped(env_id, make_vec):
     bounded.reset(seed=2)
     actions = np.tile(np.array([4.0, -2.0, -9.0], dtype=np.float32), (N, 1))
     out = wild.step(actions)
-    _assert_same(out, bounded.step(np.clip(actions, -1.0, 1.0)))
+    assert_same(out, bounded.step(np.clip(actions, -1.0, 1.0)))
     np.testing.assert_array_equal(out[0]["previous_action"], np.tile([1.0, -1.0, -1.0], (N, 1)))
 
 
@@ -382,4 +366,4 @@ def test_vector_env_pickles_and_continues_identically(env_id, make_vec):
         vec.step(action)
     clone = pickle.loads(pickle.dumps(vec))
     for action in actions[5:]:
-        _assert_same(vec.step(action), clone.step(action))
+        assert_same(vec.step(action), clone.step(action))

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from tactile_braille.agents.networks import DuelingQNetwork
+from tactile_braille.agents.networks import DuelingQNetwork, observation_tensors, soft_update
 
 
 @dataclass(frozen=True)
@@ -69,18 +69,12 @@ class DQNAgent:
         fraction = min(step / max(config.epsilon_decay_steps, 1), 1.0)
         return config.epsilon_start + fraction * (config.epsilon_end - config.epsilon_start)
 
-    def _tensor(self, array: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(array, device=self.device)
-
     @torch.no_grad()
     def act(self, observation: dict[str, np.ndarray], epsilon: float, rng: np.random.Generator) -> int:
         """Epsilon-greedy action for one observation."""
         if rng.random() < epsilon:
             return int(rng.integers(self.num_actions))
-        image = self._tensor(np.moveaxis(observation["observation"], -1, 0)[None])
-        goal = self._tensor(observation["desired_goal"][None])
-        previous = self._tensor(observation["previous_action"][None])
-        return int(self.q(image, goal, previous).argmax(dim=-1).item())
+        return int(self.q(*observation_tensors(observation, self.device)).argmax(dim=-1).item())
 
     def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator) -> int:
         """Epsilon-greedy (the paper's schedule) while exploring, greedy otherwise."""
@@ -88,7 +82,7 @@ class DQNAgent:
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One gradient step on a batch from the replay buffer; returns losses."""
-        t = {name: self._tensor(value) for name, value in batch.items()}
+        t = {name: torch.as_tensor(value, device=self.device) for name, value in batch.items()}
         with torch.no_grad():
             next_online = self.q(t["next_images"], t["goals"], t["next_previous_actions"])
             next_action = next_online.argmax(dim=-1, keepdim=True)
@@ -104,9 +98,7 @@ class DQNAgent:
         self.optimiser.zero_grad(set_to_none=True)
         loss.backward()
         self.optimiser.step()
-        with torch.no_grad():
-            for online, target_param in zip(self.q.parameters(), self.target.parameters(), strict=True):
-                target_param.lerp_(online, self.config.tau)
+        soft_update(self.q, self.target, self.config.tau)
         return {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
 
     def state_dict(self) -> dict:

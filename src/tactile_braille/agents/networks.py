@@ -8,8 +8,10 @@ units. Weights use variance-scaling (He) initialisation.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
+from torch.nn import functional as F
 
 IMAGE_FEATURES = 64 * 9 * 9
 
@@ -42,6 +44,31 @@ class Encoder(nn.Module):
         return self.layers(images)
 
 
+class GoalConditionedTrunk(nn.Module):
+    """The encoder's features joined with the goal and previous action, then a dense layer."""
+
+    def __init__(self, goal_size: int, previous_action_size: int, hidden: int = 512) -> None:
+        super().__init__()
+        self.encoder = Encoder()
+        self.dense = nn.Sequential(
+            nn.Linear(IMAGE_FEATURES + goal_size + previous_action_size, hidden), nn.ReLU()
+        )
+        self.dense.apply(_init)
+
+    def forward(
+        self, images: torch.Tensor, goals: torch.Tensor, previous_actions: torch.Tensor
+    ) -> torch.Tensor:
+        return self.dense(torch.cat([self.encoder(images), goals, previous_actions], dim=-1))
+
+
+def _small_head(inputs: int, outputs: int) -> nn.Linear:
+    """A linear output layer initialised near zero (Q near 0, policy near uniform)."""
+    head = nn.Linear(inputs, outputs)
+    nn.init.normal_(head.weight, std=0.01)
+    nn.init.zeros_(head.bias)
+    return head
+
+
 class DuelingQNetwork(nn.Module):
     """Q-values with a dueling head: ``Q = V + A - mean(A)``.
 
@@ -56,21 +83,45 @@ class DuelingQNetwork(nn.Module):
         self, num_actions: int, goal_size: int, previous_action_size: int, hidden: int = 512
     ) -> None:
         super().__init__()
-        self.encoder = Encoder()
-        self.dense = nn.Sequential(
-            nn.Linear(IMAGE_FEATURES + goal_size + previous_action_size, hidden), nn.ReLU()
-        )
-        self.value = nn.Linear(hidden, 1)
-        self.advantage = nn.Linear(hidden, num_actions)
-        self.dense.apply(_init)
-        for head in (self.value, self.advantage):
-            nn.init.normal_(head.weight, std=0.01)  # start near Q = 0
-            nn.init.zeros_(head.bias)
+        self.trunk = GoalConditionedTrunk(goal_size, previous_action_size, hidden)
+        self.value = _small_head(hidden, 1)
+        self.advantage = _small_head(hidden, num_actions)
 
     def forward(
         self, images: torch.Tensor, goals: torch.Tensor, previous_actions: torch.Tensor
     ) -> torch.Tensor:
-        features = torch.cat([self.encoder(images), goals, previous_actions], dim=-1)
-        hidden = self.dense(features)
+        hidden = self.trunk(images, goals, previous_actions)
         advantage = self.advantage(hidden)
         return self.value(hidden) + advantage - advantage.mean(dim=-1, keepdim=True)
+
+
+class PolicyNetwork(nn.Module):
+    """Categorical policy over discrete actions (same trunk, a logits head)."""
+
+    def __init__(
+        self, num_actions: int, goal_size: int, previous_action_size: int, hidden: int = 512
+    ) -> None:
+        super().__init__()
+        self.trunk = GoalConditionedTrunk(goal_size, previous_action_size, hidden)
+        self.logits = _small_head(hidden, num_actions)
+
+    def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor]:
+        """Action probabilities and their logs."""
+        logits = self.logits(self.trunk(images, goals, previous_actions))
+        return F.softmax(logits, dim=-1), F.log_softmax(logits, dim=-1)
+
+
+def observation_tensors(observation: dict[str, np.ndarray], device: torch.device) -> tuple[torch.Tensor, ...]:
+    """One environment observation as a batch of one: (image, goal, previous action)."""
+    return (
+        torch.as_tensor(np.moveaxis(observation["observation"], -1, 0)[None], device=device),
+        torch.as_tensor(observation["desired_goal"][None], device=device),
+        torch.as_tensor(observation["previous_action"][None], device=device),
+    )
+
+
+@torch.no_grad()
+def soft_update(online: nn.Module, target: nn.Module, tau: float) -> None:
+    """Polyak averaging: ``target <- (1 - tau) target + tau online``."""
+    for online_param, target_param in zip(online.parameters(), target.parameters(), strict=True):
+        target_param.lerp_(online_param, tau)

@@ -17,7 +17,12 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.networks import IMAGE_FEATURES, DuelingQNetwork, Encoder, _init
+from tactile_braille.agents.networks import (
+    DuelingQNetwork,
+    PolicyNetwork,
+    observation_tensors,
+    soft_update,
+)
 
 
 @dataclass(frozen=True)
@@ -41,29 +46,6 @@ class DiscreteSACConfig:
     target_entropy_ratio: float = 0.1
     tau: float = 0.005
     batch_size: int = 32
-
-
-class PolicyNetwork(nn.Module):
-    """Categorical policy: encoder, goal and previous action, dense 512, logits."""
-
-    def __init__(
-        self, num_actions: int, goal_size: int, previous_action_size: int, hidden: int = 512
-    ) -> None:
-        super().__init__()
-        self.encoder = Encoder()
-        self.dense = nn.Sequential(
-            nn.Linear(IMAGE_FEATURES + goal_size + previous_action_size, hidden), nn.ReLU()
-        )
-        self.logits = nn.Linear(hidden, num_actions)
-        self.dense.apply(_init)
-        nn.init.normal_(self.logits.weight, std=0.01)  # start near the uniform policy
-        nn.init.zeros_(self.logits.bias)
-
-    def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor]:
-        """Action probabilities and their logs."""
-        features = torch.cat([self.encoder(images), goals, previous_actions], dim=-1)
-        logits = self.logits(self.dense(features))
-        return F.softmax(logits, dim=-1), F.log_softmax(logits, dim=-1)
 
 
 class DiscreteSACAgent:
@@ -97,23 +79,17 @@ class DiscreteSACAgent:
         self.critic_optimiser = torch.optim.Adam(self.critics.parameters(), lr=self.config.learning_rate)
         self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=self.config.alpha_learning_rate)
 
-    def _tensor(self, array: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(array, device=self.device)
-
     @torch.no_grad()
     def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator) -> int:
         """A sampled action while exploring, the most probable one otherwise."""
-        image = self._tensor(np.moveaxis(observation["observation"], -1, 0)[None])
-        goal = self._tensor(observation["desired_goal"][None])
-        previous = self._tensor(observation["previous_action"][None])
-        probabilities = self.actor(image, goal, previous)[0][0].cpu().numpy()
+        probabilities = self.actor(*observation_tensors(observation, self.device))[0][0].cpu().numpy()
         if explore:
             return int(rng.choice(self.num_actions, p=probabilities / probabilities.sum()))
         return int(probabilities.argmax())
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One update of the critics, the actor and the temperature."""
-        t = {name: self._tensor(value) for name, value in batch.items()}
+        t = {name: torch.as_tensor(value, device=self.device) for name, value in batch.items()}
         alpha = self.log_alpha.exp().detach()
         with torch.no_grad():
             next_probs, next_log_probs = self.actor(t["next_images"], t["goals"], t["next_previous_actions"])
@@ -142,11 +118,7 @@ class DiscreteSACAgent:
         alpha_loss.backward()
         self.alpha_optimiser.step()
 
-        with torch.no_grad():
-            for online, target_param in zip(
-                self.critics.parameters(), self.targets.parameters(), strict=True
-            ):
-                target_param.lerp_(online, self.config.tau)
+        soft_update(self.critics, self.targets, self.config.tau)
         return {
             "losses/qf_loss": critic_loss.item() / 2,
             "losses/actor_loss": actor_loss.item(),
