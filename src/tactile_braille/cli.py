@@ -140,19 +140,28 @@ def _classify(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from tactile_braille.agents.train import TrainConfig, train
+    from tactile_braille.agents.presets import preset_config
+    from tactile_braille.agents.train import train
 
     if args.resume is not None:
-        run = train(run_dir=args.resume, resume=True)
+        run = train(run_dir=args.resume, resume=True, progress=not args.quiet)
     else:
         if args.task is None:
             raise ValueError("give a TASK (an environment id) or --resume RUN_DIR")
         task = args.task if "/" in args.task else f"tactile_braille/{args.task}"
-        config = TrainConfig(
-            task=task, algo=args.algo, seed=args.seed, epochs=args.epochs, backend=args.backend,
-            device=args.device, her=not args.no_her,
-        )  # fmt: skip
-        run = train(config, run_dir=args.run_dir)
+        overrides = {
+            name: getattr(args, name)
+            for name in ("seed", "epochs", "backend", "device", "precision", "threads", "test_episodes",
+                         "updates_per_step", "checkpoint_every")
+            if getattr(args, name) is not None
+        }  # fmt: skip
+        if args.no_her:
+            overrides["her"] = False
+        agent = {"shared_encoder": True} if args.shared_encoder else {}
+        if args.shared_encoder and args.algo == "dqn":
+            raise ValueError("--shared-encoder is for actor-critic agents (sac_discrete, sac, td3)")
+        config = preset_config(args.preset, task, args.algo, agent=agent, **overrides)
+        run = train(config, run_dir=args.run_dir, progress=not args.quiet)
     print(f"run folder: {run}")
     return 0
 
@@ -208,16 +217,41 @@ def build_parser() -> argparse.ArgumentParser:
     classify.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     classify.set_defaults(handler=_classify)
 
-    trainer = commands.add_parser("train", help="train an agent on a task (checkpointed, resumable)")
+    trainer = commands.add_parser(
+        "train", help="train an agent on a task (checkpointed, resumable)",
+        description="Settings come from --preset (the paper's Table II by default); options override them.",
+    )  # fmt: skip
     trainer.add_argument("task", nargs="?", help="environment id, e.g. DiscreteArrows-v0")
-    trainer.add_argument("algo", nargs="?", default="dqn", choices=("dqn", "sac_discrete"))
-    trainer.add_argument("--seed", type=int, default=0)
-    trainer.add_argument("--epochs", type=int, default=25)
-    trainer.add_argument("--backend", choices=("dataset", "render"), default="dataset")
-    trainer.add_argument("--device", default="cpu", help="cpu or cuda")
+    trainer.add_argument("algo", nargs="?", default="dqn", choices=("dqn", "sac_discrete", "sac", "td3"))
+    trainer.add_argument(
+        "--preset",
+        choices=("paper", "released"),
+        default="paper",
+        help="the paper's hyperparameters or the released code's (docs/agents.md)",
+    )
+    trainer.add_argument("--seed", type=int, default=None, help="default 0")
+    trainer.add_argument("--epochs", type=int, default=None, help="default: the preset's")
+    trainer.add_argument("--backend", choices=("dataset", "render"), default=None)
+    trainer.add_argument("--device", default=None, help="cpu (default) or cuda")
+    trainer.add_argument(
+        "--precision",
+        choices=("fp32", "bf16"),
+        default=None,
+        help="bf16: bfloat16 autocast in the updates (default fp32)",
+    )
+    trainer.add_argument("--threads", type=int, default=None, help="torch CPU threads (default 2)")
+    trainer.add_argument("--test-episodes", type=int, default=None)
+    trainer.add_argument("--updates-per-step", type=int, default=None)
+    trainer.add_argument("--checkpoint-every", type=int, default=None, help="epochs (default 1)")
+    trainer.add_argument(
+        "--shared-encoder",
+        action="store_true",
+        help="actor reuses the critic's encoder, detached (not the paper's setting)",
+    )
     trainer.add_argument("--no-her", action="store_true", help="turn hindsight relabelling off")
     trainer.add_argument("--run-dir", type=Path, default=None, help="run folder (default: runs/...)")
     trainer.add_argument("--resume", type=Path, default=None, metavar="RUN_DIR", help="continue a run")
+    trainer.add_argument("--quiet", action="store_true", help="no progress bar")
     trainer.set_defaults(handler=_train)
 
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")

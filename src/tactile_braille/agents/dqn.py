@@ -10,10 +10,12 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 
+import gymnasium as gym
 import numpy as np
 import torch
 from torch.nn import functional as F
 
+from tactile_braille.agents.common import Agent, adam, spaces_sizes
 from tactile_braille.agents.networks import DuelingQNetwork, observation_tensors, soft_update
 
 
@@ -27,7 +29,10 @@ class DQNConfig:
         tau: Polyak factor of the soft target update (per update).
         epsilon_start, epsilon_end: exploration at the start and end of the schedule.
         epsilon_decay_steps: environment steps over which epsilon decays linearly.
+        test_epsilon: exploration during test episodes (the paper: 0, deterministic;
+            the released code: 0.05).
         batch_size: transitions per update.
+        hidden: units of the dense layers after the encoder.
     """
 
     gamma: float = 0.95
@@ -36,32 +41,43 @@ class DQNConfig:
     epsilon_start: float = 1.0
     epsilon_end: float = 0.1
     epsilon_decay_steps: int = 2000
+    test_epsilon: float = 0.0
     batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
 
 
-class DQNAgent:
+class DQNAgent(Agent):
     """Double + dueling DQN.
 
     Args:
-        num_actions, goal_size, previous_action_size: sizes of the task.
+        observation_space: the task's Dict observation space.
+        action_space: its ``Discrete`` action space.
         config: hyperparameters.
         device: torch device.
+        precision: ``"fp32"`` or ``"bf16"`` (autocast in the update).
     """
+
+    checkpointed = ("q", "target", "optimiser")
 
     def __init__(
         self,
-        num_actions: int,
-        goal_size: int,
-        previous_action_size: int,
+        observation_space: gym.spaces.Dict,
+        action_space: gym.spaces.Discrete,
         config: DQNConfig | None = None,
         device: str = "cpu",
+        precision: str = "fp32",
     ) -> None:
+        super().__init__(device, precision)
+        if not isinstance(action_space, gym.spaces.Discrete):
+            raise ValueError(f"DQN needs a Discrete action space, got {action_space}")
         self.config = config or DQNConfig()
-        self.device = torch.device(device)
-        self.num_actions = num_actions
-        self.q = DuelingQNetwork(num_actions, goal_size, previous_action_size).to(self.device)
+        self.num_actions = int(action_space.n)
+        goal_size, previous_size = spaces_sizes(observation_space)
+        self.q = DuelingQNetwork(self.num_actions, goal_size, previous_size, self.config.hidden).to(
+            self.device
+        )
         self.target = copy.deepcopy(self.q).requires_grad_(False)
-        self.optimiser = torch.optim.Adam(self.q.parameters(), lr=self.config.learning_rate)
+        self.optimiser = adam(self.q.parameters(), self.config.learning_rate, self.device)
 
     def epsilon(self, step: int) -> float:
         """Exploration rate after ``step`` environment steps."""
@@ -77,38 +93,24 @@ class DQNAgent:
         return int(self.q(*observation_tensors(observation, self.device)).argmax(dim=-1).item())
 
     def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator) -> int:
-        """Epsilon-greedy (the paper's schedule) while exploring, greedy otherwise."""
-        return self.act(observation, self.epsilon(step) if explore else 0.0, rng)
+        """Epsilon-greedy (the paper's schedule) while exploring, ``test_epsilon`` otherwise."""
+        return self.act(observation, self.epsilon(step) if explore else self.config.test_epsilon, rng)
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One gradient step on a batch from the replay buffer; returns losses."""
-        t = {name: torch.as_tensor(value, device=self.device) for name, value in batch.items()}
-        with torch.no_grad():
-            next_online = self.q(t["next_images"], t["goals"], t["next_previous_actions"])
-            next_action = next_online.argmax(dim=-1, keepdim=True)
-            next_target = self.target(t["next_images"], t["goals"], t["next_previous_actions"])
-            next_value = next_target.gather(-1, next_action).squeeze(-1)
-            target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
-        q = (
-            self.q(t["images"], t["goals"], t["previous_actions"])
-            .gather(-1, t["actions"][:, None])
-            .squeeze(-1)
-        )
-        loss = F.smooth_l1_loss(q, target)
+        t = self.tensors(batch)
+        with self.autocast():
+            with torch.no_grad():
+                next_online = self.q(t["next_images"], t["goals"], t["next_previous_actions"])
+                next_action = next_online.argmax(dim=-1, keepdim=True)
+                next_target = self.target(t["next_images"], t["goals"], t["next_previous_actions"])
+                next_value = next_target.gather(-1, next_action).squeeze(-1).float()
+                target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
+            q_all = self.q(t["images"], t["goals"], t["previous_actions"])
+            q = q_all.gather(-1, t["actions"][:, None]).squeeze(-1).float()
+            loss = F.smooth_l1_loss(q, target)
         self.optimiser.zero_grad(set_to_none=True)
         loss.backward()
         self.optimiser.step()
         soft_update(self.q, self.target, self.config.tau)
         return {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
-
-    def state_dict(self) -> dict:
-        return {
-            "q": self.q.state_dict(),
-            "target": self.target.state_dict(),
-            "optimiser": self.optimiser.state_dict(),
-        }
-
-    def load_state_dict(self, state: dict) -> None:
-        self.q.load_state_dict(state["q"])
-        self.target.load_state_dict(state["target"])
-        self.optimiser.load_state_dict(state["optimiser"])

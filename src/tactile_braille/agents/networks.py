@@ -1,12 +1,23 @@
 """The paper's networks: an Atari-style encoder with the goal and previous action joined after it.
 
 Encoder: conv 32/64/64 filters, kernels 8/4/3, strides 4/2/1, ReLU, no pooling,
-on the 100x100x1 tactile image (5,184 features). The goal one-hot and the
-previous action are concatenated to the features, then a dense layer of 512
-units. Weights use variance-scaling (He) initialisation.
+on the 100x100x1 tactile image (5,184 features). The goal one-hot, the
+previous action (and, for continuous critics, the action) are concatenated to
+the features, then dense layers (the paper's single layer of 512 units; the
+released continuous SAC used 1024 then 512). Weights use variance-scaling (He)
+initialisation; output layers start near zero.
+
+A trunk may *share* another network's encoder (``encoder=...``): its features
+are then detached, so only the owner (the critic) trains it, as in SAC-AE and
+DrQ. The shared encoder is not a submodule of the borrower: it is neither in
+its ``parameters()`` nor in its ``state_dict()``.
 """
 
 from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -14,6 +25,7 @@ from torch import nn
 from torch.nn import functional as F
 
 IMAGE_FEATURES = 64 * 9 * 9
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 
 
 def _init(module: nn.Module) -> None:
@@ -45,20 +57,34 @@ class Encoder(nn.Module):
 
 
 class GoalConditionedTrunk(nn.Module):
-    """The encoder's features joined with the goal and previous action, then a dense layer."""
+    """Image features joined with vectors (goal, previous action, ...), then dense ReLU layers.
 
-    def __init__(self, goal_size: int, previous_action_size: int, hidden: int = 512) -> None:
+    Args:
+        vector_size: total length of the vectors joined after the encoder.
+        hidden: units of each dense layer.
+        encoder: another network's encoder to share (detached), or None for an own one.
+    """
+
+    def __init__(self, vector_size: int, hidden: Sequence[int] = (512,), encoder: Encoder | None = None):
         super().__init__()
-        self.encoder = Encoder()
-        self.dense = nn.Sequential(
-            nn.Linear(IMAGE_FEATURES + goal_size + previous_action_size, hidden), nn.ReLU()
-        )
+        if not hidden or min(hidden) < 1:
+            raise ValueError(f"hidden needs at least one positive layer size, got {hidden}")
+        if encoder is None:
+            self.encoder = Encoder()
+            self._shared: tuple[Encoder, ...] = ()
+        else:
+            self._shared = (encoder,)
+        sizes = [IMAGE_FEATURES + vector_size, *hidden]
+        layers: list[nn.Module] = []
+        for inputs, outputs in itertools.pairwise(sizes):
+            layers += [nn.Linear(inputs, outputs), nn.ReLU()]
+        self.dense = nn.Sequential(*layers)
         self.dense.apply(_init)
+        self.features = sizes[-1]
 
-    def forward(
-        self, images: torch.Tensor, goals: torch.Tensor, previous_actions: torch.Tensor
-    ) -> torch.Tensor:
-        return self.dense(torch.cat([self.encoder(images), goals, previous_actions], dim=-1))
+    def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:
+        features = self._shared[0](images).detach() if self._shared else self.encoder(images)
+        return self.dense(torch.cat([features, *vectors], dim=-1))
 
 
 def _small_head(inputs: int, outputs: int) -> nn.Linear:
@@ -70,22 +96,28 @@ def _small_head(inputs: int, outputs: int) -> nn.Linear:
 
 
 class DuelingQNetwork(nn.Module):
-    """Q-values with a dueling head: ``Q = V + A - mean(A)``.
+    """Q-values of discrete actions with a dueling head: ``Q = V + A - mean(A)``.
 
     Args:
         num_actions: discrete actions.
         goal_size: length of the goal one-hot.
         previous_action_size: length of the previous-action vector.
-        hidden: units of the dense layer (the paper's 512).
+        hidden: units of the dense layers (the paper's 512).
+        encoder: an encoder to share (detached), or None.
     """
 
     def __init__(
-        self, num_actions: int, goal_size: int, previous_action_size: int, hidden: int = 512
+        self,
+        num_actions: int,
+        goal_size: int,
+        previous_action_size: int,
+        hidden: Sequence[int] = (512,),
+        encoder: Encoder | None = None,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size, previous_action_size, hidden)
-        self.value = _small_head(hidden, 1)
-        self.advantage = _small_head(hidden, num_actions)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.value = _small_head(self.trunk.features, 1)
+        self.advantage = _small_head(self.trunk.features, num_actions)
 
     def forward(
         self, images: torch.Tensor, goals: torch.Tensor, previous_actions: torch.Tensor
@@ -99,16 +131,93 @@ class PolicyNetwork(nn.Module):
     """Categorical policy over discrete actions (same trunk, a logits head)."""
 
     def __init__(
-        self, num_actions: int, goal_size: int, previous_action_size: int, hidden: int = 512
+        self,
+        num_actions: int,
+        goal_size: int,
+        previous_action_size: int,
+        hidden: Sequence[int] = (512,),
+        encoder: Encoder | None = None,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size, previous_action_size, hidden)
-        self.logits = _small_head(hidden, num_actions)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.logits = _small_head(self.trunk.features, num_actions)
 
     def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor]:
         """Action probabilities and their logs."""
-        logits = self.logits(self.trunk(images, goals, previous_actions))
+        logits = self.logits(self.trunk(images, goals, previous_actions)).float()
         return F.softmax(logits, dim=-1), F.log_softmax(logits, dim=-1)
+
+
+class ContinuousQNetwork(nn.Module):
+    """Q(s, g, a) of a continuous action: the action joins the goal after the encoder."""
+
+    def __init__(
+        self,
+        action_size: int,
+        goal_size: int,
+        previous_action_size: int,
+        hidden: Sequence[int] = (512,),
+        encoder: Encoder | None = None,
+    ) -> None:
+        super().__init__()
+        vector_size = goal_size + previous_action_size + action_size
+        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder)
+        self.q = _small_head(self.trunk.features, 1)
+
+    def forward(self, images, goals, previous_actions, actions) -> torch.Tensor:
+        """Q-values, shape (B,)."""
+        return self.q(self.trunk(images, goals, previous_actions, actions)).squeeze(-1).float()
+
+
+class GaussianPolicy(nn.Module):
+    """SAC's tanh-squashed Gaussian policy over actions in [-1, 1]."""
+
+    def __init__(
+        self,
+        action_size: int,
+        goal_size: int,
+        previous_action_size: int,
+        hidden: Sequence[int] = (512,),
+        encoder: Encoder | None = None,
+    ) -> None:
+        super().__init__()
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.mean = _small_head(self.trunk.features, action_size)
+        self.log_std = _small_head(self.trunk.features, action_size)
+
+    def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """A reparameterised sample, its log-probability (B,), and the deterministic action."""
+        hidden = self.trunk(images, goals, previous_actions)
+        mean = self.mean(hidden).float()
+        log_std = self.log_std(hidden).float().clamp(LOG_STD_MIN, LOG_STD_MAX)
+        std = log_std.exp()
+        noise = torch.randn_like(mean)
+        raw = mean + std * noise
+        action = torch.tanh(raw)
+        # Gaussian log-density, minus the tanh Jacobian in its stable form:
+        # log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u)).
+        log_prob = (-0.5 * noise.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+        log_prob = log_prob - (2 * (math.log(2) - raw - F.softplus(-2 * raw))).sum(-1)
+        return action, log_prob, torch.tanh(mean)
+
+
+class DeterministicPolicy(nn.Module):
+    """TD3's deterministic policy: ``tanh`` of a linear head, actions in [-1, 1]."""
+
+    def __init__(
+        self,
+        action_size: int,
+        goal_size: int,
+        previous_action_size: int,
+        hidden: Sequence[int] = (512,),
+        encoder: Encoder | None = None,
+    ) -> None:
+        super().__init__()
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.action = _small_head(self.trunk.features, action_size)
+
+    def forward(self, images, goals, previous_actions) -> torch.Tensor:
+        return torch.tanh(self.action(self.trunk(images, goals, previous_actions)).float())
 
 
 def observation_tensors(observation: dict[str, np.ndarray], device: torch.device) -> tuple[torch.Tensor, ...]:
@@ -123,5 +232,7 @@ def observation_tensors(observation: dict[str, np.ndarray], device: torch.device
 @torch.no_grad()
 def soft_update(online: nn.Module, target: nn.Module, tau: float) -> None:
     """Polyak averaging: ``target <- (1 - tau) target + tau online``."""
-    for online_param, target_param in zip(online.parameters(), target.parameters(), strict=True):
-        target_param.lerp_(online_param, tau)
+    online_params, target_params = list(online.parameters()), list(target.parameters())
+    if len(online_params) != len(target_params):
+        raise ValueError("online and target networks differ")
+    torch._foreach_lerp_(target_params, online_params, tau)

@@ -12,17 +12,14 @@ import copy
 import math
 from dataclasses import dataclass
 
+import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.networks import (
-    DuelingQNetwork,
-    PolicyNetwork,
-    observation_tensors,
-    soft_update,
-)
+from tactile_braille.agents.common import Agent, adam, spaces_sizes
+from tactile_braille.agents.networks import DuelingQNetwork, PolicyNetwork, observation_tensors, soft_update
 
 
 @dataclass(frozen=True)
@@ -38,6 +35,9 @@ class DiscreteSACConfig:
             the resulting 0.139, i.e. 0.1 ln 4).
         tau: Polyak factor of the target critics (per update).
         batch_size: transitions per update.
+        hidden: units of the dense layers after the encoder.
+        shared_encoder: the actor reuses the first critic's encoder, detached
+            (not the paper's setting; as in SAC-AE and DrQ).
     """
 
     gamma: float = 0.6
@@ -46,38 +46,48 @@ class DiscreteSACConfig:
     target_entropy_ratio: float = 0.1
     tau: float = 0.005
     batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
+    shared_encoder: bool = False
 
 
-class DiscreteSACAgent:
+class DiscreteSACAgent(Agent):
     """Discrete soft actor-critic with automatic temperature.
 
     Args:
-        num_actions, goal_size, previous_action_size: sizes of the task.
+        observation_space: the task's Dict observation space.
+        action_space: its ``Discrete`` action space.
         config: hyperparameters.
         device: torch device.
+        precision: ``"fp32"`` or ``"bf16"`` (autocast in the update).
     """
+
+    checkpointed = (
+        "actor", "critics", "targets", "log_alpha", "actor_optimiser", "critic_optimiser", "alpha_optimiser"
+    )  # fmt: skip
 
     def __init__(
         self,
-        num_actions: int,
-        goal_size: int,
-        previous_action_size: int,
+        observation_space: gym.spaces.Dict,
+        action_space: gym.spaces.Discrete,
         config: DiscreteSACConfig | None = None,
         device: str = "cpu",
+        precision: str = "fp32",
     ) -> None:
-        self.config = config or DiscreteSACConfig()
-        self.device = torch.device(device)
-        self.num_actions = num_actions
-        self.actor = PolicyNetwork(num_actions, goal_size, previous_action_size).to(self.device)
-        self.critics = nn.ModuleList(
-            [DuelingQNetwork(num_actions, goal_size, previous_action_size) for _ in range(2)]
-        ).to(self.device)
+        super().__init__(device, precision)
+        if not isinstance(action_space, gym.spaces.Discrete):
+            raise ValueError(f"discrete SAC needs a Discrete action space, got {action_space}")
+        self.config = config = config or DiscreteSACConfig()
+        self.num_actions = int(action_space.n)
+        sizes = (self.num_actions, *spaces_sizes(observation_space), config.hidden)
+        self.critics = nn.ModuleList([DuelingQNetwork(*sizes) for _ in range(2)]).to(self.device)
+        shared = self.critics[0].trunk.encoder if config.shared_encoder else None
+        self.actor = PolicyNetwork(*sizes, encoder=shared).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
         self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
-        self.target_entropy = self.config.target_entropy_ratio * math.log(num_actions)
-        self.actor_optimiser = torch.optim.Adam(self.actor.parameters(), lr=self.config.learning_rate)
-        self.critic_optimiser = torch.optim.Adam(self.critics.parameters(), lr=self.config.learning_rate)
-        self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=self.config.alpha_learning_rate)
+        self.target_entropy = config.target_entropy_ratio * math.log(self.num_actions)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, self.device)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, self.device)
+        self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=config.alpha_learning_rate)
 
     @torch.no_grad()
     def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator) -> int:
@@ -89,25 +99,27 @@ class DiscreteSACAgent:
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One update of the critics, the actor and the temperature."""
-        t = {name: torch.as_tensor(value, device=self.device) for name, value in batch.items()}
+        t = self.tensors(batch)
         alpha = self.log_alpha.exp().detach()
-        with torch.no_grad():
-            next_probs, next_log_probs = self.actor(t["next_images"], t["goals"], t["next_previous_actions"])
-            next_q = torch.min(
-                *(target(t["next_images"], t["goals"], t["next_previous_actions"]) for target in self.targets)
-            )
-            next_value = (next_probs * (next_q - alpha * next_log_probs)).sum(-1)
-            target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
-        q_values = [critic(t["images"], t["goals"], t["previous_actions"]) for critic in self.critics]
-        taken = t["actions"][:, None]
-        critic_loss = sum(F.mse_loss(q.gather(-1, taken).squeeze(-1), target) for q in q_values)
+        state = (t["images"], t["goals"], t["previous_actions"])
+        next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+        with self.autocast():
+            with torch.no_grad():
+                next_probs, next_log_probs = self.actor(*next_state)
+                next_q = torch.min(*(target(*next_state) for target in self.targets)).float()
+                next_value = (next_probs * (next_q - alpha * next_log_probs)).sum(-1)
+                target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
+            q_values = [critic(*state).float() for critic in self.critics]
+            taken = t["actions"][:, None]
+            critic_loss = sum(F.mse_loss(q.gather(-1, taken).squeeze(-1), target) for q in q_values)
         self.critic_optimiser.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_optimiser.step()
 
-        probs, log_probs = self.actor(t["images"], t["goals"], t["previous_actions"])
-        q_min = torch.min(q_values[0], q_values[1]).detach()
-        actor_loss = (probs * (alpha * log_probs - q_min)).sum(-1).mean()
+        with self.autocast():
+            probs, log_probs = self.actor(*state)
+            q_min = torch.min(q_values[0], q_values[1]).detach()
+            actor_loss = (probs * (alpha * log_probs - q_min)).sum(-1).mean()
         self.actor_optimiser.zero_grad(set_to_none=True)
         actor_loss.backward()
         self.actor_optimiser.step()
@@ -125,24 +137,3 @@ class DiscreteSACAgent:
             "losses/alpha": alpha.item(),
             "losses/entropy": entropy.mean().item(),
         }
-
-    def state_dict(self) -> dict:
-        return {
-            "actor": self.actor.state_dict(),
-            "critics": self.critics.state_dict(),
-            "targets": self.targets.state_dict(),
-            "log_alpha": self.log_alpha.detach().clone(),
-            "optimisers": [
-                o.state_dict() for o in (self.actor_optimiser, self.critic_optimiser, self.alpha_optimiser)
-            ],
-        }
-
-    def load_state_dict(self, state: dict) -> None:
-        self.actor.load_state_dict(state["actor"])
-        self.critics.load_state_dict(state["critics"])
-        self.targets.load_state_dict(state["targets"])
-        with torch.no_grad():
-            self.log_alpha.copy_(state["log_alpha"])
-        optimisers = (self.actor_optimiser, self.critic_optimiser, self.alpha_optimiser)
-        for optimiser, saved in zip(optimisers, state["optimisers"], strict=True):
-            optimiser.load_state_dict(saved)

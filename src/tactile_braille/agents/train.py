@@ -1,11 +1,13 @@
 """The training loop: epochs of environment steps, replay updates, a test each epoch, checkpoints.
 
 A run lives in ``runs/{task}__{algo}__{seed}__{time}/`` with ``config.json``
-(the resolved settings), ``progress.csv`` (one row per epoch) and, after every
-epoch, an atomic checkpoint (``checkpoint.pt``: networks, optimiser, counters
-and generator states; ``replay.npz``: the replay buffer). ``train(...,
-resume=True)`` continues a run from its last checkpoint: a crash or ``kill -9``
-costs at most the epoch in progress (its episode restarts on resume).
+(the resolved settings), ``progress.csv`` (one row per epoch), TensorBoard
+events (``charts/...``, ``losses/...``, when TensorBoard is installed) and,
+every ``checkpoint_every`` epochs, an atomic checkpoint (``checkpoint.pt``:
+networks, optimisers, counters and generator states; ``replay.{epoch}.npz``:
+the replay buffer it names). ``train(run_dir=..., resume=True)`` continues a run from its
+last checkpoint: a crash or ``kill -9`` costs at most the work since then
+(the episode in progress restarts on resume).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -23,39 +26,62 @@ import torch
 
 from tactile_braille._io import atomic_path
 from tactile_braille._registration import ENV_IDS
+from tactile_braille.agents.common import PRECISIONS
 from tactile_braille.agents.dqn import DQNAgent, DQNConfig
 from tactile_braille.agents.replay import EpisodeReplayBuffer
+from tactile_braille.agents.sac import SACAgent, SACConfig
 from tactile_braille.agents.sac_discrete import DiscreteSACAgent, DiscreteSACConfig
+from tactile_braille.agents.td3 import TD3Agent, TD3Config
 
-AGENTS = {"dqn": (DQNAgent, DQNConfig), "sac_discrete": (DiscreteSACAgent, DiscreteSACConfig)}
-"""Implemented algorithms: the agent class and its hyperparameter dataclass."""
+
+class Algorithm(NamedTuple):
+    agent: type
+    config: type
+    continuous: bool
+
+
+AGENTS = {
+    "dqn": Algorithm(DQNAgent, DQNConfig, continuous=False),
+    "sac_discrete": Algorithm(DiscreteSACAgent, DiscreteSACConfig, continuous=False),
+    "sac": Algorithm(SACAgent, SACConfig, continuous=True),
+    "td3": Algorithm(TD3Agent, TD3Config, continuous=True),
+}
+"""Implemented algorithms: agent class, hyperparameter dataclass, action kind."""
 ALGORITHMS = tuple(AGENTS)
+AgentConfig = DQNConfig | DiscreteSACConfig | SACConfig | TD3Config
 PROGRESS_FIELDS = (
     "epoch", "env_steps", "updates", "train/episodes", "train/episodic_return", "test/episodic_return",
-    "test/episode_length", "losses/q_loss", "losses/q_values", "losses/qf_loss", "losses/actor_loss",
-    "losses/alpha", "losses/entropy", "charts/SPS", "time_s",
+    "test/episode_length", "test/success_rate", "losses/q_loss", "losses/q_values", "losses/qf_loss",
+    "losses/actor_loss", "losses/alpha", "losses/entropy", "charts/SPS", "time_s",
 )  # fmt: skip
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """A training run (defaults: the paper's settings).
+    """A training run. Defaults are the paper's; :mod:`~tactile_braille.agents.presets` sets the rest.
 
     Attributes:
         task: environment id (``tactile_braille/DiscreteArrows-v0``...).
-        algo: ``"dqn"`` (double + dueling) or ``"sac_discrete"``.
-        seed: seeds networks, exploration, environments.
+        algo: ``"dqn"``, ``"sac_discrete"``, ``"sac"`` or ``"td3"``.
+        seed: seeds networks, exploration and environments.
         epochs: epochs to run.
         steps_per_epoch: environment steps per epoch (250).
-        start_steps: uniformly random actions before the policy acts (200).
-        updates_per_step: gradient updates per environment step (2).
+        start_steps: uniformly random actions before the policy acts, and
+            before updates start (200).
+        updates_per_step: gradient updates per environment step (None: 2, TD3 1).
+        update_every: updates happen in bursts every this many steps
+            (``update_every * updates_per_step`` at a time; the released TD3 used 100).
         replay_capacity: transitions kept (100,000).
         her: hindsight relabelling of wrong presses.
         test_episodes: deterministic test episodes after each epoch.
+        max_episode_steps: episode cut (None: the registry's 25).
         backend: environment backend (``dataset`` or ``render``).
         dataset: dataset path for the dataset backend (default: the cached one).
-        device: torch device.
+        device: torch device (``cpu``, ``cuda``).
+        precision: ``fp32`` or ``bf16`` (autocast in the updates).
         threads: torch CPU threads.
+        checkpoint_every: epochs between checkpoints.
+        preset: name of the preset the settings came from (a record only).
         agent: the algorithm's hyperparameters (default: the paper's for ``algo``).
     """
 
@@ -65,31 +91,49 @@ class TrainConfig:
     epochs: int = 25
     steps_per_epoch: int = 250
     start_steps: int = 200
-    updates_per_step: int = 2
+    updates_per_step: int | None = None
+    update_every: int = 1
     replay_capacity: int = 100_000
     her: bool = True
-    test_episodes: int = 10
+    test_episodes: int = 20
+    max_episode_steps: int | None = None
     backend: str = "dataset"
     dataset: str | None = None
     device: str = "cpu"
+    precision: str = "fp32"
     threads: int = 2
-    agent: DQNConfig | DiscreteSACConfig | None = None
+    checkpoint_every: int = 1
+    preset: str | None = None
+    agent: AgentConfig | None = None
 
     def __post_init__(self) -> None:
         if self.algo not in ALGORITHMS:
             raise ValueError(f"unknown algorithm {self.algo!r}; implemented: {ALGORITHMS}")
-        config_class = AGENTS[self.algo][1]
+        algorithm = AGENTS[self.algo]
         if self.agent is None:
-            object.__setattr__(self, "agent", config_class())
-        elif not isinstance(self.agent, config_class):
-            raise ValueError(f"{self.algo} takes a {config_class.__name__}, got {type(self.agent).__name__}")
+            object.__setattr__(self, "agent", algorithm.config())
+        elif not isinstance(self.agent, algorithm.config):
+            raise ValueError(
+                f"{self.algo} takes a {algorithm.config.__name__}, got {type(self.agent).__name__}"
+            )
+        if self.updates_per_step is None:
+            object.__setattr__(self, "updates_per_step", 1 if self.algo == "td3" else 2)
         if self.task not in gym.registry:
             raise ValueError(f"unknown task {self.task!r}; choose one of {ENV_IDS}")
-        if "Continuous" in self.task:
-            raise ValueError(f"{self.algo} needs a discrete task, got {self.task}")
-        for name in ("epochs", "steps_per_epoch", "test_episodes", "replay_capacity"):
+        if ("Continuous" in self.task) != algorithm.continuous:
+            kind = "continuous" if algorithm.continuous else "discrete"
+            raise ValueError(f"{self.algo} needs a {kind} task, got {self.task}")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
+        for name in ("epochs", "steps_per_epoch", "test_episodes", "replay_capacity", "update_every",
+                     "checkpoint_every", "threads"):  # fmt: skip
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        for name in ("start_steps", "updates_per_step"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
+        if self.max_episode_steps is not None and self.max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be at least 1, got {self.max_episode_steps}")
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -97,31 +141,86 @@ class TrainConfig:
     @classmethod
     def from_json(cls, data: dict) -> TrainConfig:
         data = dict(data)
-        data["agent"] = AGENTS[data["algo"]][1](**data["agent"])
+        agent = {
+            key: tuple(value) if isinstance(value, list) else value for key, value in data["agent"].items()
+        }
+        data["agent"] = AGENTS[data["algo"]].config(**agent)
         return cls(**data)
 
+    def with_changes(self, **changes: Any) -> TrainConfig:
+        """A copy with fields changed (``agent`` as a dict of hyperparameters to change)."""
+        agent_changes = changes.pop("agent", None)
+        if agent_changes:
+            changes["agent"] = dataclasses.replace(self.agent, **agent_changes)
+        return dataclasses.replace(self, **changes)
 
-def _make_env(config: TrainConfig) -> gym.Env:
-    kwargs = {"backend": config.backend}
+
+def make_env(config: TrainConfig) -> gym.Env:
+    """The task's environment as the run configures it."""
+    kwargs: dict[str, Any] = {"backend": config.backend}
     if config.dataset is not None:
         kwargs["dataset"] = config.dataset
+    if config.max_episode_steps is not None:
+        kwargs["max_episode_steps"] = config.max_episode_steps
     return gym.make(config.task, **kwargs)
 
 
-def evaluate(agent, env: gym.Env, episodes: int, seed: int) -> tuple[float, float]:
-    """Mean return and length of deterministic (greedy) episodes."""
+def make_agent(config: TrainConfig, env: gym.Env):
+    """The run's agent for the task's spaces."""
+    agent_class = AGENTS[config.algo].agent
+    return agent_class(env.observation_space, env.action_space, config.agent, config.device, config.precision)
+
+
+def evaluate(agent, env: gym.Env, episodes: int, seed: int) -> dict[str, float]:
+    """Mean return, length and success rate of test episodes (the agent's test-time actions)."""
     rng = np.random.default_rng(seed)
-    returns, lengths = [], []
+    returns, lengths, successes = [], [], []
     for episode in range(episodes):
         observation, _ = env.reset(seed=seed + episode)
-        total, steps, done = 0.0, 0, False
+        total, steps, done, info = 0.0, 0, False, {}
         while not done:
             action = agent.policy_action(observation, 0, explore=False, rng=rng)
-            observation, reward, terminated, truncated, _ = env.step(action)
+            observation, reward, terminated, truncated, info = env.step(action)
             total, steps, done = total + reward, steps + 1, terminated or truncated
         returns.append(total)
         lengths.append(steps)
-    return float(np.mean(returns)), float(np.mean(lengths))
+        successes.append(float(info.get("is_success", total > 0)))
+    return {
+        "test/episodic_return": float(np.mean(returns)),
+        "test/episode_length": float(np.mean(lengths)),
+        "test/success_rate": float(np.mean(successes)),
+    }
+
+
+def _open_run(
+    config: TrainConfig | None, run_dir: str | Path | None, resume: bool
+) -> tuple[TrainConfig, Path]:
+    if resume:
+        if run_dir is None:
+            raise ValueError("resume needs the run folder")
+        run_dir = Path(run_dir)
+        try:
+            config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            raise ValueError(f"{run_dir} is not a resumable run: {error}") from None
+        return config, run_dir
+    config = config or TrainConfig()
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    run_dir = Path(run_dir or f"runs/{config.task.split('/')[-1]}__{config.algo}__{config.seed}__{stamp}")
+    if (run_dir / "config.json").exists():
+        raise FileExistsError(f"{run_dir} holds a run already; resume it or choose another folder")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_path(run_dir / "config.json") as temporary:
+        temporary.write_text(json.dumps(config.to_json(), indent=2))
+    return config, run_dir
+
+
+def _tensorboard(run_dir: Path):
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:  # TensorBoard is optional; the CSV log is always written
+        return None
+    return SummaryWriter(str(run_dir))
 
 
 def train(
@@ -131,92 +230,129 @@ def train(
     progress: bool = True,
 ) -> Path:
     """Train (or, with ``resume``, continue) a run; returns its folder."""
-    if resume:
-        if run_dir is None:
-            raise ValueError("resume needs the run folder")
-        run_dir = Path(run_dir)
-        try:
-            config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
-        except (OSError, ValueError, KeyError, TypeError) as error:
-            raise ValueError(f"{run_dir} is not a resumable run: {error}") from None
-    else:
-        config = config or TrainConfig()
-        stamp = time.strftime("%Y%m%d-%H%M%S")
-        run_dir = Path(run_dir or f"runs/{config.task.split('/')[-1]}__{config.algo}__{config.seed}__{stamp}")
-        if (run_dir / "config.json").exists():
-            raise FileExistsError(f"{run_dir} holds a run already; pass resume=True to continue it")
-        run_dir.mkdir(parents=True, exist_ok=True)
-        with atomic_path(run_dir / "config.json") as temporary:
-            temporary.write_text(json.dumps(config.to_json(), indent=2))
+    config, run_dir = _open_run(config, run_dir, resume)
     torch.set_num_threads(config.threads)
-
-    env, test_env = _make_env(config), _make_env(config)
-    spaces = env.observation_space
-    goal_size = spaces["desired_goal"].shape[0]
-    previous_size = spaces["previous_action"].shape[0]
-    agent_class = AGENTS[config.algo][0]
-    agent = agent_class(env.action_space.n, goal_size, previous_size, config.agent, config.device)
-    buffer = EpisodeReplayBuffer(config.replay_capacity, goal_size, (), previous_size, her=config.her)
+    env, test_env = make_env(config), make_env(config)
+    agent = make_agent(config, env)
+    action_shape = env.action_space.shape if AGENTS[config.algo].continuous else ()
+    buffer = EpisodeReplayBuffer(
+        config.replay_capacity,
+        env.observation_space["desired_goal"].shape[0],
+        action_shape,
+        env.observation_space["previous_action"].shape[0],
+        her=config.her,
+    )
     rng = np.random.default_rng(config.seed)
     torch.manual_seed(config.seed)
     start_epoch, env_steps, updates = 0, 0, 0
     checkpoint = run_dir / "checkpoint.pt"
     if resume and checkpoint.exists():
-        state = torch.load(checkpoint, weights_only=False)
+        state = torch.load(checkpoint, weights_only=False, map_location=agent.device)
         agent.load_state_dict(state["agent"])
         rng.bit_generator.state = state["rng"]
         torch.set_rng_state(state["torch_rng"])
         start_epoch, env_steps, updates = state["epoch"] + 1, state["env_steps"], state["updates"]
-        buffer.load(run_dir / "replay.npz")
+        buffer.load(run_dir / state["replay"])
 
+    def random_action():
+        if action_shape:
+            return rng.uniform(-1.0, 1.0, size=action_shape).astype(np.float32)
+        return int(rng.integers(env.action_space.n))
+
+    writer = _tensorboard(run_dir)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=config.epochs, initial=start_epoch, desc=run_dir.name, unit="epoch")
     observation, _ = env.reset(seed=int(rng.integers(2**31)))
     buffer.start_episode(observation)
     episode_return, recent_returns, losses = 0.0, [], {}
-    for epoch in range(start_epoch, config.epochs):
-        started = time.perf_counter()
-        for _ in range(config.steps_per_epoch):
-            if env_steps < config.start_steps:
-                action = int(rng.integers(env.action_space.n))
-            else:
-                action = agent.policy_action(observation, env_steps, explore=True, rng=rng)
-            observation, reward, terminated, truncated, _ = env.step(action)
-            buffer.add_step(action, reward, observation, terminated)
-            episode_return += reward
-            env_steps += 1
-            if terminated or truncated:
-                buffer.end_episode()
-                recent_returns.append(episode_return)
-                episode_return = 0.0
-                observation, _ = env.reset(seed=int(rng.integers(2**31)))
-                buffer.start_episode(observation)
-            if env_steps >= config.start_steps and buffer.size >= config.agent.batch_size:
-                for _ in range(config.updates_per_step):
-                    losses = agent.update(buffer.sample(config.agent.batch_size, rng))
-                    updates += 1
-        test_return, test_length = evaluate(agent, test_env, config.test_episodes, seed=10_000 * (epoch + 1))
-        elapsed = time.perf_counter() - started
-        row = {
-            "epoch": epoch, "env_steps": env_steps, "updates": updates, "train/episodes": len(recent_returns),
-            "train/episodic_return": float(np.mean(recent_returns)) if recent_returns else float("nan"),
-            "test/episodic_return": test_return, "test/episode_length": test_length,
-            **losses, "charts/SPS": config.steps_per_epoch / elapsed, "time_s": elapsed,
-        }  # fmt: skip
-        recent_returns = []
-        _append_progress(run_dir / "progress.csv", row)
-        if progress:
-            print(f"epoch {epoch:4d}  steps {env_steps:6d}  test return {test_return:.2f}  "
-                  f"length {test_length:4.1f}  {row['charts/SPS']:.0f} steps/s")  # fmt: skip
-        buffer.save(run_dir / "replay.npz")  # committed episodes; the one in progress restarts
-        with atomic_path(checkpoint, fsync=True) as temporary:
-            torch.save(
-                {
-                    "agent": agent.state_dict(), "rng": rng.bit_generator.state,
-                    "torch_rng": torch.get_rng_state(), "epoch": epoch, "env_steps": env_steps,
-                    "updates": updates,
-                },
-                temporary,
-            )  # fmt: skip
+    burst = config.update_every * config.updates_per_step
+    try:
+        for epoch in range(start_epoch, config.epochs):
+            started = time.perf_counter()
+            for _ in range(config.steps_per_epoch):
+                if env_steps < config.start_steps:
+                    action = random_action()
+                else:
+                    action = agent.policy_action(observation, env_steps, explore=True, rng=rng)
+                observation, reward, terminated, truncated, _ = env.step(action)
+                buffer.add_step(action, reward, observation, terminated)
+                episode_return += reward
+                env_steps += 1
+                if terminated or truncated:
+                    buffer.end_episode()
+                    recent_returns.append(episode_return)
+                    episode_return = 0.0
+                    observation, _ = env.reset(seed=int(rng.integers(2**31)))
+                    buffer.start_episode(observation)
+                if (
+                    env_steps >= config.start_steps
+                    and env_steps % config.update_every == 0
+                    and buffer.size >= config.agent.batch_size
+                ):
+                    for _ in range(burst):
+                        losses = agent.update(buffer.sample(config.agent.batch_size, rng))
+                        updates += 1
+            train_time = time.perf_counter() - started
+            tests = evaluate(agent, test_env, config.test_episodes, seed=10_000 * (epoch + 1))
+            row = {
+                "epoch": epoch, "env_steps": env_steps, "updates": updates,
+                "train/episodes": len(recent_returns),
+                "train/episodic_return": float(np.mean(recent_returns)) if recent_returns else float("nan"),
+                **tests, **losses, "charts/SPS": config.steps_per_epoch / train_time,
+                "time_s": time.perf_counter() - started,
+            }  # fmt: skip
+            recent_returns = []
+            _append_progress(run_dir / "progress.csv", row)
+            if writer is not None:
+                for key, value in row.items():
+                    if "/" in key:
+                        writer.add_scalar(key if key.startswith(("charts", "losses")) else f"charts/{key}",
+                                          value, env_steps)  # fmt: skip
+                writer.flush()
+            if bar is not None:
+                bar.set_postfix(test_return=f"{tests['test/episodic_return']:.2f}",
+                                sps=f"{row['charts/SPS']:.0f}")  # fmt: skip
+                bar.update(1)
+            if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
+                _save_checkpoint(run_dir, agent, buffer, rng, epoch, env_steps, updates)
+    finally:
+        if bar is not None:
+            bar.close()
+        if writer is not None:
+            writer.close()
     return run_dir
+
+
+def _save_checkpoint(run_dir: Path, agent, buffer, rng, epoch: int, env_steps: int, updates: int) -> None:
+    """Write the replay buffer, then the checkpoint that names it, then drop older buffers.
+
+    Each step is atomic, so a crash anywhere leaves the previous checkpoint and
+    the buffer it names intact. The episode in progress is not saved: it
+    restarts on resume.
+    """
+    replay = f"replay.{epoch}.npz"
+    buffer.save(run_dir / replay)
+    state = {
+        "agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+        "epoch": epoch, "env_steps": env_steps, "updates": updates, "replay": replay,
+    }  # fmt: skip
+    with atomic_path(run_dir / "checkpoint.pt", fsync=True) as temporary:
+        torch.save(state, temporary)
+    for old in run_dir.glob("replay.*.npz"):
+        if old.name != replay:
+            old.unlink()
+
+
+def read_progress(run_dir: str | Path) -> list[dict[str, float]]:
+    """The run's per-epoch log as a list of rows (numbers as floats, blanks as NaN)."""
+    with open(Path(run_dir) / "progress.csv", newline="") as handle:
+        return [
+            {key: float(value) if value not in ("", None) else float("nan") for key, value in row.items()}
+            for row in csv.DictReader(handle)
+        ]
 
 
 def _append_progress(path: Path, row: dict) -> None:

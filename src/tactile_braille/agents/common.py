@@ -1,0 +1,87 @@
+"""What every agent shares: spaces, optimisers, precision, batches as tensors, checkpoints.
+
+Speed decisions (measured by ``benchmarks/train_throughput.py``): Adam runs
+*fused* (one kernel over all parameters; the per-parameter loop cost about as
+much as the network's forward and backward together on a CPU), and
+``precision="bf16"`` runs the networks under bfloat16 autocast (losses,
+log-probabilities and targets stay float32). Neither changes the algorithm.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from typing import ClassVar
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+PRECISIONS = ("fp32", "bf16")
+
+
+def spaces_sizes(observation_space: gym.spaces.Dict) -> tuple[int, int]:
+    """Lengths of the goal one-hot and of the previous-action vector."""
+    try:
+        return observation_space["desired_goal"].shape[0], observation_space["previous_action"].shape[0]
+    except (KeyError, TypeError) as error:
+        raise ValueError(
+            f"agents need a goal-conditioned Dict observation space with 'observation', "
+            f"'desired_goal' and 'previous_action', got {observation_space}"
+        ) from error
+
+
+def adam(parameters, learning_rate: float, device: torch.device) -> torch.optim.Adam:
+    """Adam, fused when the device supports it (CPU and CUDA do in PyTorch >= 2.4)."""
+    parameters = list(parameters)
+    try:
+        return torch.optim.Adam(parameters, lr=learning_rate, fused=True)
+    except (RuntimeError, ValueError):  # device without a fused kernel
+        return torch.optim.Adam(parameters, lr=learning_rate)
+
+
+class Agent:
+    """Base of the agents: device, precision, checkpointing of named parts.
+
+    Subclasses list in ``checkpointed`` the attributes that make up their
+    state (modules, optimisers, tensors); ``state_dict`` and
+    ``load_state_dict`` follow that list.
+    """
+
+    checkpointed: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, device: str | torch.device, precision: str) -> None:
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
+        self.device = torch.device(device)
+        self.precision = precision
+
+    def autocast(self) -> contextlib.AbstractContextManager:
+        """bfloat16 autocast for ``precision="bf16"``, nothing otherwise."""
+        if self.precision == "bf16":
+            return torch.autocast(self.device.type, dtype=torch.bfloat16)
+        return contextlib.nullcontext()
+
+    def tensors(self, batch: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        """A replay batch on the agent's device."""
+        return {
+            name: torch.as_tensor(value).to(self.device, non_blocking=True) for name, value in batch.items()
+        }
+
+    def state_dict(self) -> dict:
+        state = {}
+        for name in self.checkpointed:
+            part = getattr(self, name)
+            state[name] = part.detach().clone() if isinstance(part, torch.Tensor) else part.state_dict()
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        missing = set(self.checkpointed) - set(state)
+        if missing:
+            raise ValueError(f"checkpoint lacks {sorted(missing)} for {type(self).__name__}")
+        for name in self.checkpointed:
+            part = getattr(self, name)
+            if isinstance(part, torch.Tensor):
+                with torch.no_grad():
+                    part.copy_(state[name])
+            else:
+                part.load_state_dict(state[name])

@@ -1,0 +1,91 @@
+"""Named hyperparameter presets: the paper's Table II and the released code's settings.
+
+``paper`` follows the paper's Table II, taking the released code's values
+where the table is silent; ``released`` reproduces the configurations saved
+with the original runs (``reference/braille_rl_2020/.../config.json``). The
+differences are listed in ``docs/agents.md`` and in :data:`DIFFERENCES`.
+
+>>> config = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn")
+>>> config.epochs, config.updates_per_step, config.agent.gamma
+(25, 2, 0.95)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+PRESETS = ("paper", "released")
+
+# Epochs of the original runs (sim): discrete arrows 25, discrete alphabet 100,
+# continuous arrows 100, continuous alphabet 2000.
+EPOCHS = {
+    ("Discrete", "Arrows"): 25,
+    ("Discrete", "Alphabet"): 100,
+    ("Continuous", "Arrows"): 100,
+    ("Continuous", "Alphabet"): 2000,
+}
+
+# Values on which the released code departs from the paper's Table II.
+DIFFERENCES: dict[str, dict[str, tuple[Any, Any]]] = {
+    "dqn": {"agent.test_epsilon": (0.0, 0.05)},
+    "sac": {"agent.hidden": ((512,), (1024, 512)), "max_episode_steps": (25, 35)},
+    "td3": {"agent.learning_rate": (5e-5, 7.5e-5), "update_every": (1, 100)},
+    "sac_discrete": {},
+}
+"""algo -> setting -> (paper, released)."""
+
+
+def _family(task: str) -> tuple[str, str]:
+    name = task.split("/")[-1]
+    for kind in ("Discrete", "Continuous"):
+        for keys in ("Arrows", "Alphabet"):
+            if name.startswith(f"{kind}{keys}"):
+                return kind, keys
+    raise ValueError(f"no preset for task {task!r}")
+
+
+def preset_settings(name: str, task: str, algo: str) -> dict[str, Any]:
+    """The TrainConfig fields (``agent.*`` for hyperparameters) that preset ``name`` sets."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {PRESETS}")
+    if algo not in DIFFERENCES:
+        raise ValueError(f"unknown algorithm {algo!r}; choose one of {tuple(DIFFERENCES)}")
+    settings: dict[str, Any] = {
+        "epochs": EPOCHS[_family(task)],
+        "steps_per_epoch": 250,
+        "start_steps": 200,
+        "updates_per_step": 1 if algo == "td3" else 2,
+        "update_every": 1,
+        "replay_capacity": 100_000,
+        "test_episodes": 20,
+        "her": True,
+        "max_episode_steps": 25,
+        "agent.batch_size": 32,
+    }
+    if name == "released":
+        settings.update({key: value[1] for key, value in DIFFERENCES[algo].items()})
+    return settings
+
+
+def preset_config(name: str, task: str, algo: str, **overrides: Any):
+    """A :class:`~tactile_braille.agents.train.TrainConfig` from a preset, with overrides on top.
+
+    ``overrides`` take TrainConfig fields, and ``agent`` as a dict of
+    hyperparameters to change.
+    """
+    from tactile_braille.agents.train import AGENTS, TrainConfig
+
+    if algo not in AGENTS:
+        raise ValueError(f"unknown algorithm {algo!r}; choose one of {tuple(AGENTS)}")
+    settings = preset_settings(name, task, algo)
+    agent_fields = {key[6:]: value for key, value in settings.items() if key.startswith("agent.")}
+    agent_fields.update(overrides.pop("agent", None) or {})
+    fields = {key: value for key, value in settings.items() if not key.startswith("agent.")}
+    fields.update(overrides)
+    agent_class = AGENTS[algo].config
+    known = {field.name for field in dataclasses.fields(agent_class)}
+    unknown = set(agent_fields) - known
+    if unknown:
+        raise ValueError(f"{agent_class.__name__} has no hyperparameters {sorted(unknown)}")
+    return TrainConfig(task=task, algo=algo, preset=name, agent=agent_class(**agent_fields), **fields)

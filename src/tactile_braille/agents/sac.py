@@ -1,0 +1,151 @@
+"""Soft actor-critic (Haarnoja et al. 2018) for the continuous tasks, the paper's SAC.
+
+Reads top to bottom: hyperparameters, a tanh-squashed Gaussian policy and twin
+Q critics over the paper's encoder (the action joins the goal after the
+convolutions), then the three updates: critics towards the soft Bellman
+target of the Polyak-averaged targets, the actor through the reparameterised
+sample, the temperature towards the target entropy.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from tactile_braille.agents.common import Agent, adam, spaces_sizes
+from tactile_braille.agents.networks import (
+    ContinuousQNetwork,
+    GaussianPolicy,
+    observation_tensors,
+    soft_update,
+)
+
+
+@dataclass(frozen=True)
+class SACConfig:
+    """Hyperparameters (defaults: the paper's Table II).
+
+    Attributes:
+        gamma: discount.
+        learning_rate: actor and critic step size.
+        alpha_learning_rate: temperature step size.
+        target_entropy: entropy the temperature steers the policy towards
+            (the paper's -6 for a 3-D action; the usual choice is -3).
+        tau: Polyak factor of the target critics (the paper's polyak 0.995).
+        batch_size: transitions per update.
+        hidden: units of the dense layers (the paper's 512; the released code's 1024, 512).
+        shared_encoder: the actor reuses the first critic's encoder, detached
+            (not the paper's setting; as in SAC-AE and DrQ).
+    """
+
+    gamma: float = 0.95
+    learning_rate: float = 5e-4
+    alpha_learning_rate: float = 1e-3
+    target_entropy: float = -6.0
+    tau: float = 0.005
+    batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
+    shared_encoder: bool = False
+
+
+class SACAgent(Agent):
+    """SAC with twin critics and automatic temperature, actions in [-1, 1].
+
+    Args:
+        observation_space: the task's Dict observation space.
+        action_space: its ``Box(-1, 1, (n,))`` action space.
+        config: hyperparameters.
+        device: torch device.
+        precision: ``"fp32"`` or ``"bf16"`` (autocast in the update).
+    """
+
+    checkpointed = (
+        "actor", "critics", "targets", "log_alpha", "actor_optimiser", "critic_optimiser", "alpha_optimiser"
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        observation_space: gym.spaces.Dict,
+        action_space: gym.spaces.Box,
+        config: SACConfig | None = None,
+        device: str = "cpu",
+        precision: str = "fp32",
+    ) -> None:
+        super().__init__(device, precision)
+        self.action_size = _unit_box_size(action_space, "SAC")
+        self.config = config = config or SACConfig()
+        sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
+        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes) for _ in range(2)]).to(self.device)
+        shared = self.critics[0].trunk.encoder if config.shared_encoder else None
+        self.actor = GaussianPolicy(*sizes, encoder=shared).to(self.device)
+        self.targets = copy.deepcopy(self.critics).requires_grad_(False)
+        self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, self.device)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, self.device)
+        self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=config.alpha_learning_rate)
+
+    @torch.no_grad()
+    def policy_action(
+        self, observation: dict, step: int, explore: bool, rng: np.random.Generator
+    ) -> np.ndarray:
+        """A policy sample while exploring, the squashed mean otherwise."""
+        sample, _, mean = self.actor(*observation_tensors(observation, self.device))
+        return (sample if explore else mean)[0].cpu().numpy().astype(np.float32)
+
+    def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        """One update of the critics, the actor and the temperature."""
+        t = self.tensors(batch)
+        alpha = self.log_alpha.exp().detach()
+        state = (t["images"], t["goals"], t["previous_actions"])
+        next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+        with self.autocast():
+            with torch.no_grad():
+                next_actions, next_log_probs, _ = self.actor(*next_state)
+                next_q = torch.min(*(target(*next_state, next_actions) for target in self.targets))
+                next_value = next_q - alpha * next_log_probs
+                target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
+            critic_loss = sum(F.mse_loss(critic(*state, t["actions"]), target) for critic in self.critics)
+        self.critic_optimiser.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_optimiser.step()
+
+        self.critics.requires_grad_(False)  # the actor's loss moves the actor only
+        with self.autocast():
+            actions, log_probs, _ = self.actor(*state)
+            q = torch.min(*(critic(*state, actions) for critic in self.critics))
+            actor_loss = (alpha * log_probs - q).mean()
+        self.actor_optimiser.zero_grad(set_to_none=True)
+        actor_loss.backward()
+        self.actor_optimiser.step()
+        self.critics.requires_grad_(True)
+
+        alpha_loss = -(self.log_alpha * (log_probs.detach() + self.config.target_entropy)).mean()
+        self.alpha_optimiser.zero_grad(set_to_none=True)
+        alpha_loss.backward()
+        self.alpha_optimiser.step()
+
+        soft_update(self.critics, self.targets, self.config.tau)
+        return {
+            "losses/qf_loss": critic_loss.item() / 2,
+            "losses/actor_loss": actor_loss.item(),
+            "losses/alpha": alpha.item(),
+            "losses/entropy": -log_probs.mean().item(),
+        }
+
+
+def _unit_box_size(action_space: gym.Space, algorithm: str) -> int:
+    """The size of a flat ``Box(-1, 1)`` action space, or a ValueError."""
+    if not (
+        isinstance(action_space, gym.spaces.Box)
+        and len(action_space.shape) == 1
+        and np.all(action_space.low == -1)
+        and np.all(action_space.high == 1)
+    ):
+        raise ValueError(f"{algorithm} needs a flat Box(-1, 1) action space, got {action_space}")
+    return int(action_space.shape[0])

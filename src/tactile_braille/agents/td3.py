@@ -1,0 +1,158 @@
+"""Twin delayed DDPG (Fujimoto et al. 2018) for the continuous tasks, the paper's TD3.
+
+Reads top to bottom: hyperparameters, a deterministic tanh policy and twin Q
+critics over the paper's encoder, acting with Gaussian noise whose scale
+decays linearly (the paper's 1.0 -> 0.05 over 2,000 steps), and the update:
+critics towards the clipped double-Q target with target-policy smoothing,
+the actor and the Polyak targets every ``policy_delay`` critic updates.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from tactile_braille.agents.common import Agent, adam, spaces_sizes
+from tactile_braille.agents.networks import (
+    ContinuousQNetwork,
+    DeterministicPolicy,
+    observation_tensors,
+    soft_update,
+)
+from tactile_braille.agents.sac import _unit_box_size
+
+
+@dataclass(frozen=True)
+class TD3Config:
+    """Hyperparameters (defaults: the paper's Table II).
+
+    Attributes:
+        gamma: discount.
+        learning_rate: actor and critic step size (the paper's 5e-5; the released code's 7.5e-5).
+        tau: Polyak factor of the targets (the paper's polyak 0.995).
+        noise_start, noise_end: standard deviation of the exploration noise
+            at the start and the end of its linear schedule.
+        noise_decay_steps: environment steps over which the noise decays.
+        test_noise: noise during test episodes (0: deterministic).
+        target_noise: standard deviation of the target-policy smoothing noise.
+        noise_clip: bound of the smoothing noise.
+        policy_delay: critic updates per actor (and target) update.
+        batch_size: transitions per update.
+        hidden: units of the dense layers.
+        shared_encoder: the actor reuses the first critic's encoder, detached (not the paper's).
+    """
+
+    gamma: float = 0.95
+    learning_rate: float = 5e-5
+    tau: float = 0.005
+    noise_start: float = 1.0
+    noise_end: float = 0.05
+    noise_decay_steps: int = 2000
+    test_noise: float = 0.0
+    target_noise: float = 0.05
+    noise_clip: float = 0.2
+    policy_delay: int = 2
+    batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
+    shared_encoder: bool = False
+
+
+class TD3Agent(Agent):
+    """TD3 with the paper's decaying exploration noise, actions in [-1, 1].
+
+    Args:
+        observation_space: the task's Dict observation space.
+        action_space: its ``Box(-1, 1, (n,))`` action space.
+        config: hyperparameters.
+        device: torch device.
+        precision: ``"fp32"`` or ``"bf16"`` (autocast in the update).
+    """
+
+    checkpointed = (
+        "actor", "actor_target", "critics", "critic_targets", "actor_optimiser", "critic_optimiser",
+        "critic_updates",
+    )  # fmt: skip
+
+    def __init__(
+        self,
+        observation_space: gym.spaces.Dict,
+        action_space: gym.spaces.Box,
+        config: TD3Config | None = None,
+        device: str = "cpu",
+        precision: str = "fp32",
+    ) -> None:
+        super().__init__(device, precision)
+        self.action_size = _unit_box_size(action_space, "TD3")
+        self.config = config = config or TD3Config()
+        if config.policy_delay < 1:
+            raise ValueError(f"policy_delay must be at least 1, got {config.policy_delay}")
+        sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
+        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes) for _ in range(2)]).to(self.device)
+        shared = self.critics[0].trunk.encoder if config.shared_encoder else None
+        self.actor = DeterministicPolicy(*sizes, encoder=shared).to(self.device)
+        self.critic_targets = copy.deepcopy(self.critics).requires_grad_(False)
+        target_shared = self.critic_targets[0].trunk.encoder if config.shared_encoder else None
+        self.actor_target = DeterministicPolicy(*sizes, encoder=target_shared).to(self.device)
+        self.actor_target.load_state_dict(self.actor.state_dict())
+        self.actor_target.requires_grad_(False)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, self.device)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, self.device)
+        self.critic_updates = torch.zeros((), dtype=torch.int64)
+
+    def noise(self, step: int) -> float:
+        """Exploration noise after ``step`` environment steps."""
+        config = self.config
+        fraction = min(step / max(config.noise_decay_steps, 1), 1.0)
+        return config.noise_start + fraction * (config.noise_end - config.noise_start)
+
+    @torch.no_grad()
+    def policy_action(
+        self, observation: dict, step: int, explore: bool, rng: np.random.Generator
+    ) -> np.ndarray:
+        """The policy's action plus Gaussian noise (the schedule's, or ``test_noise``), clipped."""
+        action = self.actor(*observation_tensors(observation, self.device))[0].cpu().numpy()
+        scale = self.noise(step) if explore else self.config.test_noise
+        if scale > 0:
+            action = action + scale * rng.standard_normal(action.shape)
+        return np.clip(action, -1.0, 1.0).astype(np.float32)
+
+    def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        """One critic update; every ``policy_delay``-th also updates the actor and the targets."""
+        config = self.config
+        t = self.tensors(batch)
+        state = (t["images"], t["goals"], t["previous_actions"])
+        next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+        with self.autocast():
+            with torch.no_grad():
+                smoothing = (torch.randn_like(t["actions"]) * config.target_noise).clamp(
+                    -config.noise_clip, config.noise_clip
+                )
+                next_actions = (self.actor_target(*next_state) + smoothing).clamp(-1.0, 1.0)
+                next_q = torch.min(*(target(*next_state, next_actions) for target in self.critic_targets))
+                target = t["rewards"] + config.gamma * (1.0 - t["dones"]) * next_q
+            q_values = [critic(*state, t["actions"]) for critic in self.critics]
+            critic_loss = sum(F.mse_loss(q, target) for q in q_values)
+        self.critic_optimiser.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_optimiser.step()
+        self.critic_updates += 1
+        losses = {"losses/qf_loss": critic_loss.item() / 2, "losses/q_values": q_values[0].mean().item()}
+
+        if int(self.critic_updates) % config.policy_delay == 0:
+            self.critics.requires_grad_(False)
+            with self.autocast():
+                actor_loss = -self.critics[0](*state, self.actor(*state)).mean()
+            self.actor_optimiser.zero_grad(set_to_none=True)
+            actor_loss.backward()
+            self.actor_optimiser.step()
+            self.critics.requires_grad_(True)
+            soft_update(self.actor, self.actor_target, config.tau)
+            soft_update(self.critics, self.critic_targets, config.tau)
+            losses["losses/actor_loss"] = actor_loss.item()
+        return losses
