@@ -23,7 +23,6 @@ import time
 import gymnasium as gym
 import numpy as np
 import torch
-from torch import nn
 
 import tactile_braille  # noqa: F401 - registers the environments
 from tactile_braille.agents import preset_config, read_progress, train

@@ -96,8 +96,13 @@ def test_save_and_load_round_trip(tmp_path):
         np.testing.assert_array_equal(getattr(restored, name), getattr(buffer, name))
     assert (restored.size, restored.next_slot, restored.frames_written) == (6, 6, 4)
     too_small = EpisodeReplayBuffer(2, GOALS, (), 5)
-    with pytest.raises(ValueError, match="does not fit"):
+    with pytest.raises(ValueError, match="another frame ring"):
         too_small.load(tmp_path / "replay.npz")
+    assert too_small.size == 0  # nothing changed
+    other_goals = EpisodeReplayBuffer(100, GOALS + 1, (), 5)
+    with pytest.raises(ValueError, match="goals of shape"):
+        other_goals.load(tmp_path / "replay.npz")
+    assert other_goals.size == 0 and not other_goals.frames.any()
 
 
 def test_add_step_before_start_raises():

@@ -12,8 +12,9 @@ does not apply). ``her=False`` turns it off.
 
 Memory at the paper's capacity of 100,000 transitions: the frame ring holds
 twice as many frames as transitions (episodes of one step need two frames
-per transition), 200,000 x 1,250 bytes = 250 MB, plus about 60 bytes per
-transition.
+per transition) plus room for the episode in progress (whose frames are
+written before its transitions are committed), about 200,000 x 1,250 bytes
+= 250 MB, plus about 60 bytes per transition.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ class EpisodeReplayBuffer:
         action_shape: shape of one action (``()`` for discrete).
         previous_action_size: length of the previous-action vector.
         her: relabel episodes that ended with a wrong press.
+        max_episode_steps: the longest episode it will record (room is kept
+            for the frames of the episode in progress).
     """
 
     def __init__(
@@ -45,12 +48,17 @@ class EpisodeReplayBuffer:
         action_shape: tuple[int, ...],
         previous_action_size: int,
         her: bool = True,
+        max_episode_steps: int = 100,
     ) -> None:
         if capacity < 1:
             raise ValueError(f"capacity must be at least 1, got {capacity}")
+        if max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
         self.capacity = int(capacity)
         self.her = her
-        self.frame_capacity = 2 * self.capacity
+        self.max_episode_steps = int(max_episode_steps)
+        # Committed transitions use at most 2 frames each; the episode in progress adds its own.
+        self.frame_capacity = 2 * self.capacity + self.max_episode_steps + 1
         self.frames = np.zeros((self.frame_capacity, PACKED_BYTES), dtype=np.uint8)
         self.frame_index = np.zeros((self.capacity, 2), dtype=np.int64)  # (this, next)
         self.previous_actions = np.zeros((self.capacity, 2, previous_action_size), dtype=np.float32)
@@ -87,6 +95,10 @@ class EpisodeReplayBuffer:
         """Record one step of the episode in progress (goal = its desired goal)."""
         if self._current_frame < 0:
             raise RuntimeError("call start_episode before add_step")
+        if len(self._episode) >= self.max_episode_steps:
+            raise RuntimeError(
+                f"episode longer than max_episode_steps={self.max_episode_steps}; build the buffer with more"
+            )
         next_frame = self._store_frame(next_observation["observation"])
         next_previous = np.asarray(next_observation["previous_action"], dtype=np.float32)
         self._episode.append(
@@ -160,6 +172,7 @@ class EpisodeReplayBuffer:
             np.savez(
                 handle,
                 counters=np.array([self.next_frame, self.frames_written, self.next_slot, self.size]),
+                frame_capacity=np.array(self.frame_capacity),
                 frames=self.frames[:frames],
                 **arrays,
             )
@@ -167,11 +180,18 @@ class EpisodeReplayBuffer:
     def load(self, path: str | Path) -> None:
         """Restore a buffer written by :meth:`save` (same capacity and sizes)."""
         with np.load(path) as data:
-            for name in self._ARRAYS:
-                stored, mine = data[name], getattr(self, name)
-                if stored.shape[1:] != mine.shape[1:] or len(stored) > len(mine):
-                    raise ValueError(f"{path}: {name} of shape {stored.shape} does not fit {mine.shape}")
-                mine[: len(stored)] = stored
+            if "frame_capacity" not in data or int(data["frame_capacity"]) != self.frame_capacity:
+                raise ValueError(
+                    f"{path}: written by a buffer with another frame ring "
+                    "(its capacity or max_episode_steps differ)"
+                )
+            stored = {name: data[name] for name in self._ARRAYS}
+            for name, array in stored.items():  # check everything before changing anything
+                mine = getattr(self, name)
+                if array.shape[1:] != mine.shape[1:] or len(array) > len(mine):
+                    raise ValueError(f"{path}: {name} of shape {array.shape} does not fit {mine.shape}")
+            for name, array in stored.items():
+                getattr(self, name)[: len(array)] = array
             self.next_frame, self.frames_written, self.next_slot, self.size = (
                 int(v) for v in data["counters"]
             )

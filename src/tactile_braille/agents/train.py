@@ -120,7 +120,8 @@ class TrainConfig:
             object.__setattr__(self, "updates_per_step", 1 if self.algo == "td3" else 2)
         if self.task not in gym.registry:
             raise ValueError(f"unknown task {self.task!r}; choose one of {ENV_IDS}")
-        if ("Continuous" in self.task) != algorithm.continuous:
+        braille = self.task.startswith("tactile_braille/")
+        if braille and ("Continuous" in self.task) != algorithm.continuous:
             kind = "continuous" if algorithm.continuous else "discrete"
             raise ValueError(f"{self.algo} needs a {kind} task, got {self.task}")
         if self.precision not in PRECISIONS:
@@ -156,10 +157,12 @@ class TrainConfig:
 
 
 def make_env(config: TrainConfig) -> gym.Env:
-    """The task's environment as the run configures it."""
-    kwargs: dict[str, Any] = {"backend": config.backend}
-    if config.dataset is not None:
-        kwargs["dataset"] = config.dataset
+    """The task's environment as the run configures it (other goal-conditioned ids are made as they are)."""
+    kwargs: dict[str, Any] = {}
+    if config.task.startswith("tactile_braille/"):
+        kwargs["backend"] = config.backend
+        if config.dataset is not None:
+            kwargs["dataset"] = config.dataset
     if config.max_episode_steps is not None:
         kwargs["max_episode_steps"] = config.max_episode_steps
     return gym.make(config.task, **kwargs)
@@ -167,8 +170,12 @@ def make_env(config: TrainConfig) -> gym.Env:
 
 def make_agent(config: TrainConfig, env: gym.Env):
     """The run's agent for the task's spaces."""
-    agent_class = AGENTS[config.algo].agent
-    return agent_class(env.observation_space, env.action_space, config.agent, config.device, config.precision)
+    algorithm = AGENTS[config.algo]
+    if isinstance(env.action_space, gym.spaces.Box) != algorithm.continuous:
+        raise ValueError(f"{config.algo} cannot act in {config.task}'s action space {env.action_space}")
+    return algorithm.agent(
+        env.observation_space, env.action_space, config.agent, config.device, config.precision
+    )
 
 
 def evaluate(agent, env: gym.Env, episodes: int, seed: int) -> dict[str, float]:
@@ -234,13 +241,14 @@ def train(
     torch.set_num_threads(config.threads)
     env, test_env = make_env(config), make_env(config)
     agent = make_agent(config, env)
-    action_shape = env.action_space.shape if AGENTS[config.algo].continuous else ()
+    action_shape = env.action_space.shape if AGENTS[config.algo].continuous else ()  # checked by make_agent
     buffer = EpisodeReplayBuffer(
         config.replay_capacity,
         env.observation_space["desired_goal"].shape[0],
         action_shape,
         env.observation_space["previous_action"].shape[0],
         her=config.her,
+        max_episode_steps=max(getattr(env.spec, "max_episode_steps", None) or 0, 100),
     )
     rng = np.random.default_rng(config.seed)
     torch.manual_seed(config.seed)
@@ -293,7 +301,8 @@ def train(
                     and buffer.size >= config.agent.batch_size
                 ):
                     for _ in range(burst):
-                        losses = agent.update(buffer.sample(config.agent.batch_size, rng))
+                        # Merged, so that a loss some updates skip (TD3's delayed actor) keeps its last value.
+                        losses.update(agent.update(buffer.sample(config.agent.batch_size, rng)))
                         updates += 1
             train_time = time.perf_counter() - started
             tests = evaluate(agent, test_env, config.test_episodes, seed=10_000 * (epoch + 1))
