@@ -1,6 +1,6 @@
 """Small but real learning runs: HER matters on bit flipping; SAC and TD3 learn a continuous toy.
 
-Each runs in about a minute on two cores (bf16 autocast, one update per step).
+Each runs in one to two minutes on two cores (bf16 autocast, one update per step).
 The toys (tests/toys.py) have the braille tasks' interface, so the agents,
 the replay buffer with the paper's HER rule and the training loop run as on
 the keyboard.
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+import pytest
 import torch
 
 import toys
@@ -39,9 +40,9 @@ def run(tmp_path, name: str, **settings) -> list[float]:
 def test_her_solves_bit_flipping_that_fails_without_it(tmp_path):
     """Six bits: random pressing succeeds once in 64 episodes; the paper's HER rule makes it learnable."""
     common = {"task": "toys/BitFlipPress-v0", "algo": "dqn", "steps_per_epoch": 200}
-    with_her = run(tmp_path, "her", epochs=9, her=True, **common)
+    with_her = run(tmp_path, "her", epochs=12, her=True, **common)
     without_her = run(tmp_path, "no_her", epochs=6, her=False, **common)
-    assert max(with_her[-2:]) >= 0.9, with_her
+    assert max(with_her[-3:]) >= 0.9, with_her
     assert max(without_her) <= 0.2, without_her
 
 
@@ -72,16 +73,19 @@ def tap_success(agent, env) -> float:
     return float(np.mean(hits))
 
 
+@pytest.mark.slow
 def test_td3_learns_to_tap_the_goal_cell_from_replay():
-    """TD3's critic, smoothed target and delayed actor learn the toy from 1,500 random taps.
+    """TD3's critic, smoothed target and delayed actor learn the toy from 1,500 random taps (2 minutes).
 
-    Online, TD3 needs more updates than a two-minute test allows on a CPU (its
-    deterministic actor saturates early); learning from a fixed buffer checks
-    the algorithm itself.
+    Online, TD3 needs more updates than a two-minute test allows on a CPU: its
+    deterministic tanh actor saturates at the action bounds early (success
+    stays at 0.25, the rate of always tapping an end cell) and recovers slowly.
+    Learning from a fixed buffer checks the algorithm itself. Measured with
+    seed 0: 0.25 up to 2,000 updates, 0.84 at 2,500.
     """
     torch.manual_seed(0)
     env = gym.make("toys/ContinuousTap-v0").unwrapped
-    agent = TD3Agent(env.observation_space, env.action_space, TD3Config(learning_rate=3e-4), precision="bf16")
+    agent = TD3Agent(env.observation_space, env.action_space, TD3Config(learning_rate=1e-4), precision="bf16")
     buffer = EpisodeReplayBuffer(4_000, env.cells, (1,), 1)
     rng = np.random.default_rng(0)
     for episode in range(1_500):
@@ -92,7 +96,7 @@ def test_td3_learns_to_tap_the_goal_cell_from_replay():
         buffer.add_step(action, reward, observation, terminated)
         buffer.end_episode()
     before = tap_success(agent, env)
-    for _ in range(1_500):
+    for _ in range(2_500):
         agent.update(buffer.sample(32, rng))
     after = tap_success(agent, env)
     assert after >= 0.7, (before, after)

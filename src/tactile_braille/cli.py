@@ -166,6 +166,16 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _report(args: argparse.Namespace) -> int:
+    from tactile_braille.agents.report import write_report
+
+    for run in args.runs:
+        report = write_report(run, episodes=args.episodes)
+        print(report.read_text())
+        print(f"wrote {report} and {report.parent / 'curve.png'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tactile-braille``."""
     parser = argparse.ArgumentParser(
@@ -253,6 +263,11 @@ def build_parser() -> argparse.ArgumentParser:
     trainer.add_argument("--resume", type=Path, default=None, metavar="RUN_DIR", help="continue a run")
     trainer.add_argument("--quiet", action="store_true", help="no progress bar")
     trainer.set_defaults(handler=_train)
+
+    report = commands.add_parser("report", help="evaluate a training run and write its report and curve")
+    report.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
+    report.add_argument("--episodes", type=int, default=100, help="final test episodes (default 100)")
+    report.set_defaults(handler=_report)
 
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
     data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))

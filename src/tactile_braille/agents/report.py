@@ -1,0 +1,112 @@
+"""A run's report: a final evaluation of its last checkpoint, convergence figures and its curve.
+
+``tactile-braille report RUN_DIR`` writes ``RUN_DIR/report.md`` and
+``RUN_DIR/curve.png``. Convergence is given two ways: the paper's (the first
+epoch whose test return reaches 95 % of the run's best) and a stricter,
+absolute one (the first epoch whose test return reaches 0.95), which compares
+across runs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tactile_braille._io import atomic_path
+from tactile_braille.agents.train import TrainConfig, evaluate, make_agent, make_env, read_progress
+
+
+def convergence_epoch(
+    returns: list[float], fraction: float | None = 0.95, level: float | None = None
+) -> int | None:
+    """First epoch reaching ``fraction`` of the best return (the paper's rule) or an absolute ``level``."""
+    values = np.asarray(returns, dtype=float)
+    if values.size == 0 or np.all(np.isnan(values)):
+        return None
+    threshold = level if level is not None else fraction * np.nanmax(values)
+    reached = np.flatnonzero(values >= threshold)
+    return int(reached[0]) if reached.size else None
+
+
+def evaluate_run(run_dir: str | Path, episodes: int = 100, seed: int = 123_456) -> dict[str, float]:
+    """Test episodes of the run's last checkpoint (the agent's test-time actions)."""
+    run_dir = Path(run_dir)
+    config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
+    checkpoint = run_dir / "checkpoint.pt"
+    if not checkpoint.exists():
+        raise FileNotFoundError(f"{run_dir} has no checkpoint yet")
+    torch.set_num_threads(config.threads)
+    env = make_env(config)
+    agent = make_agent(config, env)
+    agent.load_state_dict(torch.load(checkpoint, weights_only=False, map_location=agent.device)["agent"])
+    return evaluate(agent, env, episodes, seed)
+
+
+def write_report(run_dir: str | Path, episodes: int = 100) -> Path:
+    """Evaluate the run, plot its curve and write ``report.md``; returns the report's path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tactile_braille.gallery import save_figure
+
+    run_dir = Path(run_dir)
+    config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
+    rows = read_progress(run_dir)
+    if not rows:
+        raise ValueError(f"{run_dir} has no finished epoch to report")
+    returns = [row["test/episodic_return"] for row in rows]
+    paper_epoch = convergence_epoch(returns)
+    absolute_epoch = convergence_epoch(returns, level=0.95)
+    final = evaluate_run(run_dir, episodes)
+
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    epochs = [int(row["epoch"]) for row in rows]
+    ax.plot(epochs, returns, marker="o", markersize=3, label="test return (each epoch)")
+    train_returns = [row["train/episodic_return"] for row in rows]
+    ax.plot(epochs, train_returns, alpha=0.5, label="training return")
+    if paper_epoch is not None:
+        ax.axvline(
+            paper_epoch, color="grey", linestyle="--", label=f"convergence (paper's rule): {paper_epoch}"
+        )
+    ax.set_xlabel("epoch (250 steps)")
+    ax.set_ylabel("average return")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_title(f"{config.task.split('/')[-1]}, {config.algo}, seed {config.seed}")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, run_dir / "curve.png")
+
+    def show(epoch: int | None) -> str:
+        return "not reached" if epoch is None else str(epoch)
+
+    her = "on" if config.her else "off"
+    minutes = sum(row["time_s"] for row in rows if not math.isnan(row["time_s"])) / 60
+    steps, updates = int(rows[-1]["env_steps"]), int(rows[-1]["updates"])
+    lines = [
+        f"# {config.task.split('/')[-1]} with {config.algo} (seed {config.seed})",
+        "",
+        f"Preset `{config.preset}`, {config.precision}, backend `{config.backend}`, HER {her}.",
+        "",
+        "| | |",
+        "|---|---|",
+        f"| epochs trained | {len(rows)} ({steps} env steps, {updates} updates) |",
+        f"| convergence epoch, paper's rule (95 % of the best) | {show(paper_epoch)} |",
+        f"| first epoch with test return >= 0.95 | {show(absolute_epoch)} |",
+        f"| best test return in training | {np.nanmax(returns):.2f} |",
+        f"| final evaluation ({episodes} episodes) | return {final['test/episodic_return']:.3f}, "
+        f"success {final['test/success_rate']:.3f}, length {final['test/episode_length']:.1f} steps |",
+        f"| training time | {minutes:.1f} min |",
+        "",
+        "![curve](curve.png)",
+        "",
+    ]  # fmt: skip
+    report = run_dir / "report.md"
+    with atomic_path(report) as temporary:
+        temporary.write_text("\n".join(lines))
+    return report
