@@ -3,12 +3,12 @@
 For each agent this prints the time of one update (batch 32) and the
 environment steps per second of a short training run (``--start`` random
 steps, then policy steps with ``updates_per_step`` updates each: 2, TD3 1),
-side by side with Stable-Baselines3's DQN and SAC given the paper's network
+side by side with Stable-Baselines3's DQN, SAC and TD3 given the paper's network
 (encoder conv 32/64/64, goal and previous action joined after it, dense 512)
 through a features extractor. Both use hindsight replay (SB3: its
 HerReplayBuffer, 'future' goals; ours: the paper's rule) and Polyak targets
 (tau 0.005). One difference favours SB3's SAC: its twin critics share one
-encoder, ours have one each as in the paper. Target: ours at least 2x SB3's
+encoder (as do TD3's), ours have one each as in the paper. Target: ours at least 2x SB3's
 throughput.
 
     python benchmarks/train_throughput.py [--steps 150] [--updates 20]
@@ -105,7 +105,7 @@ class PaperExtractor:
 
 
 def sb3_model(algo: str, start: int):
-    from stable_baselines3 import DQN, SAC, HerReplayBuffer
+    from stable_baselines3 import DQN, SAC, TD3, HerReplayBuffer
 
     env = gym.make(TASKS[algo])
     policy_kwargs = {"features_extractor_class": PaperExtractor.build(), "net_arch": [512]}
@@ -116,6 +116,9 @@ def sb3_model(algo: str, start: int):
     )  # fmt: skip
     if algo == "dqn":
         return DQN("MultiInputPolicy", env, exploration_fraction=0.1, target_update_interval=1, **common)
+    if algo == "td3":
+        common.update(gradient_steps=1, learning_rate=5e-5, target_policy_noise=0.05, target_noise_clip=0.2)
+        return TD3("MultiInputPolicy", env, policy_delay=2, **common)
     return SAC("MultiInputPolicy", env, target_entropy=-6.0, **common)
 
 
@@ -146,20 +149,20 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {args.threads} threads; batch 32; updates/step 2 (TD3 1)")
     print(f"{'agent':<34}{'ms/update':>10}{'steps/s':>10}{'vs SB3':>9}")
-    sb3 = {}
-    for algo in ("dqn", "sac"):
-        if algo in args.algos or (algo == "sac" and "td3" in args.algos):
-            sb3[algo] = sb3_steps_per_second(algo, args.start, args.steps)
-            update = sb3_update_ms(algo, args.updates)
-            print(f"{'SB3 ' + algo.upper() + ' (same network)':<34}{update:>10.1f}{sb3[algo]:>10.1f}"
-                  f"{1.0:>8.2f}x")  # fmt: skip
+    counterparts = {"dqn": "dqn", "sac": "sac", "td3": "td3"}  # SB3 has no discrete SAC
     for algo in args.algos:
-        reference = sb3.get("dqn" if algo in ("dqn", "sac_discrete") else "sac")
+        reference = None
+        if algo in counterparts:
+            reference = sb3_steps_per_second(algo, args.start, args.steps)
+            update = sb3_update_ms(algo, args.updates)
+            name = f"SB3 {algo.upper()} (same network)"
+            print(f"{name:<34}{update:>10.1f}{reference:>10.1f}{1.0:>8.2f}x")
         for precision in ("fp32", "bf16"):
             update = ours_update_ms(algo, precision, args.updates)
             rate = ours_steps_per_second(algo, precision, args.start, args.steps)
-            print(f"{f'ours {algo} {precision}':<34}{update:>10.1f}{rate:>10.1f}{rate / reference:>8.2f}x")
-    print("(SAC_DISC and DQN compare with SB3 DQN; SAC and TD3 with SB3 SAC. TD3 does 1 update/step.)")
+            ratio = f"{rate / reference:>8.2f}x" if reference else f"{'-':>9}"
+            print(f"{f'ours {algo} {precision}':<34}{update:>10.1f}{rate:>10.1f}{ratio}")
+    print("(updates per step: 2, TD3 1; ratios are steps/s against SB3's same algorithm in this run)")
 
 
 if __name__ == "__main__":
