@@ -16,10 +16,18 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
+TB := $(VENV)/bin/tactile-braille
+DQN_RUN := $(OUT)/DiscreteArrows__dqn
+
+# Datasets, galleries, then a short DQN + HER run on DiscreteArrows (about two
+# minutes; continued, not restarted, if it exists) and its report.
 run: $(STAMP)
-	$(VENV)/bin/tactile-braille data
-	$(VENV)/bin/tactile-braille show --output $(OUT)/gallery.png
-	$(VENV)/bin/tactile-braille show grid-alphabet --output $(OUT)/grid-alphabet.png
+	$(TB) data
+	$(TB) show --output $(OUT)/gallery.png
+	$(TB) show grid-alphabet --output $(OUT)/grid-alphabet.png
+	if [ -f $(DQN_RUN)/config.json ]; then $(TB) train --resume $(DQN_RUN); \
+	else $(TB) train DiscreteArrows-v0 dqn --epochs 6 --precision bf16 --test-episodes 10 --run-dir $(DQN_RUN); fi
+	$(TB) report $(DQN_RUN) --episodes 50
 
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"
@@ -35,6 +43,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/render.py
 	$(PY) benchmarks/collect.py
 	$(PY) benchmarks/separability.py
+	$(PY) benchmarks/train_throughput.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

@@ -206,3 +206,30 @@ def test_agent_config_must_match_the_algorithm():
 
     with pytest.raises(ValueError, match="sac_discrete takes a DiscreteSACConfig"):
         TrainConfig(algo="sac_discrete", agent=DQNConfig())
+
+
+def test_convergence_epoch_rules():
+    from tactile_braille.agents.report import convergence_epoch
+
+    curve = [0.1, 0.5, 0.8, 0.78, 0.9, 0.85]
+    assert convergence_epoch(curve) == 4  # 95 % of the best (0.9) is 0.855: first reached at epoch 4
+    assert convergence_epoch(curve, fraction=0.85) == 2  # 0.765
+    assert convergence_epoch(curve, level=0.95) is None  # never reaches 0.95 in absolute terms
+    assert convergence_epoch([0.0, 0.96, 1.0], level=0.95) == 1
+    assert convergence_epoch([]) is None
+
+
+def test_report_evaluates_the_checkpoint_and_draws_the_curve(env_datasets, tmp_path):
+    from tactile_braille.cli import main
+
+    config = TrainConfig(
+        epochs=2, steps_per_epoch=40, start_steps=20, updates_per_step=1, test_episodes=2,
+        replay_capacity=500, dataset=str(env_datasets["tactile_braille/DiscreteArrows-v0"]), threads=1,
+    )  # fmt: skip
+    run = train(config, run_dir=tmp_path / "run", progress=False)
+    assert main(["report", str(run), "--episodes", "3"]) == 0
+    report = (run / "report.md").read_text()
+    assert "| epochs trained | 2 (80 env steps" in report
+    assert "final evaluation (3 episodes)" in report
+    assert (run / "curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["report", str(tmp_path / "missing")]) == 2  # a clear error, not a traceback
