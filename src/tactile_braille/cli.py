@@ -176,6 +176,20 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluate(args: argparse.Namespace) -> int:
+    from tactile_braille.evaluation import evaluate_typing
+
+    for run in args.runs:
+        result = evaluate_typing(run, sentences=not args.no_sentences, seed=args.seed)
+        print(f"{run}: typing accuracy {result['accuracy']:.3f} over {result['keys_asked']} keys "
+              f"({result['sequences']} sequences), {result['total_steps']} steps")  # fmt: skip
+        for sentence in result.get("sentences", []):
+            score = f"({sentence['accuracy']:.0%}, {sentence['steps']} steps)"
+            print(f"  {sentence['text']}\n  {sentence['typed']}  {score}")
+        print(f"wrote {run / 'typing.json'} and {run / 'typing_confusion.png'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tactile-braille``."""
     parser = argparse.ArgumentParser(
@@ -268,6 +282,12 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
     report.add_argument("--episodes", type=int, default=100, help="final test episodes (default 100)")
     report.set_defaults(handler=_report)
+
+    evaluate = commands.add_parser("evaluate", help="the paper's typing evaluation of a training run")
+    evaluate.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
+    evaluate.add_argument("--no-sentences", action="store_true", help="alphabet tasks: skip the sentences")
+    evaluate.add_argument("--seed", type=int, default=0, help="seed of the start poses")
+    evaluate.set_defaults(handler=_evaluate)
 
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
     data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))

@@ -32,8 +32,8 @@ def convergence_epoch(
     return int(reached[0]) if reached.size else None
 
 
-def evaluate_run(run_dir: str | Path, episodes: int = 100, seed: int = 123_456) -> dict[str, float]:
-    """Test episodes of the run's last checkpoint (the agent's test-time actions)."""
+def load_run(run_dir: str | Path):
+    """The run's config, a fresh environment, and its agent restored from the last checkpoint."""
     run_dir = Path(run_dir)
     config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
     checkpoint = run_dir / "checkpoint.pt"
@@ -43,6 +43,12 @@ def evaluate_run(run_dir: str | Path, episodes: int = 100, seed: int = 123_456) 
     env = make_env(config)
     agent = make_agent(config, env)
     agent.load_state_dict(torch.load(checkpoint, weights_only=False, map_location=agent.device)["agent"])
+    return config, env, agent
+
+
+def evaluate_run(run_dir: str | Path, episodes: int = 100, seed: int = 123_456) -> dict[str, float]:
+    """Test episodes of the run's last checkpoint (the agent's test-time actions)."""
+    _, env, agent = load_run(run_dir)
     return evaluate(agent, env, episodes, seed)
 
 

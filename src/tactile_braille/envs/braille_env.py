@@ -77,13 +77,22 @@ class BrailleEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Start an episode: a random goal key and a random start pose.
 
-        ``options={"goal_key": "Q"}`` fixes the goal instead.
+        ``options={"goal_key": "Q"}`` fixes the goal instead;
+        ``options={"keep_pose": True}`` keeps the sensor where the last episode
+        left it (typing a sequence of keys without a reset between them: the
+        sensor taps again where it is, and the previous action starts at zero).
         """
-        goal = (options or {}).get("goal_key")
+        options = dict(options or {})
+        goal = options.pop("goal_key", None)
+        keep_pose = bool(options.pop("keep_pose", False))
+        if options:
+            raise ValueError(f"unknown reset options {sorted(options)}; known: goal_key, keep_pose")
         if goal is not None and goal not in self.goal_keys:
             raise ValueError(f"goal_key {goal!r} is not one of {self.goal_keys}")
+        if keep_pose and not self._path_mm:
+            raise ValueError("keep_pose needs an earlier reset: there is no pose to keep")
         super().reset(seed=seed)
-        self._core.reset(self._all, self.np_random)
+        self._core.reset(self._all, self.np_random, keep_pose=keep_pose)
         if goal is not None:
             self._core.goal[0] = self.goal_keys.index(goal)
         pose = self._core.sensor_pose_mm()[0]

@@ -139,8 +139,12 @@ class BatchedBraille:
         return np.concatenate([xy, self.depth_mm[:, None]], axis=-1)
 
     # ------------------------------------------------------------ resets
-    def reset(self, mask: np.ndarray, rng: np.random.Generator) -> None:
-        """Draw a new goal and start pose for the environments in ``mask`` and tap once."""
+    def reset(self, mask: np.ndarray, rng: np.random.Generator, keep_pose: bool = False) -> None:
+        """Draw a new goal and start pose for the environments in ``mask`` and tap once.
+
+        ``keep_pose`` keeps the sensor where it is (typing a sequence of keys
+        without a reset between them) and only taps there again.
+        """
         index = np.flatnonzero(mask)
         if not len(index):
             return
@@ -149,15 +153,19 @@ class BatchedBraille:
         self.pressed_code[index] = -1
         self.previous_action[index] = 0.0
         if self.task.continuous:
-            self.position_mm[index] = rng.uniform(self._workspace_low, self._workspace_high, (len(index), 2))
+            if not keep_pose:
+                self.position_mm[index] = rng.uniform(
+                    self._workspace_low, self._workspace_high, (len(index), 2)
+                )
             self.depth_mm[index] = RESET_TAP_DEPTH_MM
             xy = self.position_mm[index] + self._frame_origin
             images, _ = self.backend.continuous_taps(xy[:, 0], xy[:, 1], self.depth_mm[index], rng)
         else:
-            rows, cols = self.grid_codes.shape
-            self.cell[index] = np.stack(
-                [rng.integers(rows, size=len(index)), rng.integers(cols, size=len(index))], axis=-1
-            )
+            if not keep_pose:
+                rows, cols = self.grid_codes.shape
+                self.cell[index] = np.stack(
+                    [rng.integers(rows, size=len(index)), rng.integers(cols, size=len(index))], axis=-1
+                )
             images, _ = self._discrete_taps(index, np.zeros(len(index), dtype=bool), rng)
         self.images[index] = images
 

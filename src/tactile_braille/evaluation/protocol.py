@@ -1,0 +1,203 @@
+"""Typing evaluation as in the paper (Section V): sequences of keys, no reset between keys.
+
+Arrows: all 24 permutations of (UP, DOWN, LEFT, RIGHT). Alphabet: 10 random
+permutations of the 27 keys (A-Z, SPACE), drawn by :func:`paper_sequences`
+with seed 1 (the release drew its own with seed 1 from another generator; the
+list we use is in ``docs/evaluation.md``).
+The agent acts deterministically; the sensor starts at a random pose once per
+sequence and stays where each press left it for the next key. A key counts as
+typed right when the first key pressed for it is the goal; a key not pressed
+within the episode limit (25 steps) counts as missed, and typing goes on with
+the next key from where the sensor is.
+
+Metrics: typing accuracy (keys typed right / keys asked), typing efficiency
+(total steps over all sequences, the paper's "steps"), and a confusion matrix
+(rows: goal key; columns: the task's keys, then ``OTHER`` for a key outside
+the task, then ``NONE`` for a time-out).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+
+from tactile_braille.keyboard.layout import ALPHABET_KEYS, ARROW_KEYS
+
+OTHER, NONE = "OTHER", "NONE"
+SENTENCES = (
+    "THE QUICK BROWN FOX JUMPS OVER THE LAZY DOG",
+    "PACK MY BOX WITH FIVE DOZEN LIQUOR JUGS",
+    "SPHINX OF BLACK QUARTZ JUDGE MY VOW",
+    "LEARNING TO TYPE ON A BRAILLE KEYBOARD BY TOUCH",
+    "A ROBOT READS THE KEYS WITH ITS FINGERTIP BEFORE IT PRESSES ONE",
+)
+"""Pangrams and ordinary sentences for the alphabet tasks (spaces typed as SPACE)."""
+
+
+def paper_sequences(keys: str, count: int = 10, seed: int = 1) -> list[tuple[str, ...]]:
+    """The evaluation sequences: all 24 arrow permutations, or ``count`` permutations of the alphabet."""
+    if keys == "arrows":
+        return list(itertools.permutations(ARROW_KEYS))
+    if keys == "alphabet":
+        rng = np.random.default_rng(seed)
+        return [tuple(ALPHABET_KEYS[i] for i in rng.permutation(len(ALPHABET_KEYS))) for _ in range(count)]
+    raise ValueError(f"keys must be 'arrows' or 'alphabet', got {keys!r}")
+
+
+def text_keys(text: str) -> tuple[str, ...]:
+    """The keys that type ``text`` (letters and spaces only)."""
+    keys = []
+    for character in text.upper():
+        if character == " ":
+            keys.append("SPACE")
+        elif character in ALPHABET_KEYS:
+            keys.append(character)
+        else:
+            raise ValueError(f"cannot type {character!r}: the alphabet tasks have A-Z and SPACE")
+    return tuple(keys)
+
+
+@dataclass
+class TypingResult:
+    """What typing a list of sequences gave."""
+
+    keys: tuple[str, ...]
+    sequences: list[tuple[str, ...]]
+    typed: list[list[str]] = field(default_factory=list)
+    steps: list[list[int]] = field(default_factory=list)
+
+    @property
+    def accuracy(self) -> float:
+        """Keys typed right, as a share of the keys asked."""
+        pairs = [(g, t) for sequence, typed in zip(self.sequences, self.typed, strict=True)
+                 for g, t in zip(sequence, typed, strict=True)]  # fmt: skip
+        return float(np.mean([g == t for g, t in pairs])) if pairs else float("nan")
+
+    @property
+    def total_steps(self) -> int:
+        """Steps over all sequences (the paper's typing efficiency)."""
+        return int(sum(sum(s) for s in self.steps))
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return (*self.keys, OTHER, NONE)
+
+    def confusion(self) -> np.ndarray:
+        """Counts, rows: goal key (task order); columns: :attr:`columns`."""
+        matrix = np.zeros((len(self.keys), len(self.columns)), dtype=np.int64)
+        for sequence, typed in zip(self.sequences, self.typed, strict=True):
+            for goal, pressed in zip(sequence, typed, strict=True):
+                matrix[self.keys.index(goal), self.columns.index(pressed)] += 1
+        return matrix
+
+    def summary(self) -> dict:
+        return {
+            "sequences": len(self.sequences),
+            "keys_asked": int(sum(len(s) for s in self.sequences)),
+            "accuracy": self.accuracy,
+            "total_steps": self.total_steps,
+            "steps_per_key": self.total_steps / max(sum(len(s) for s in self.sequences), 1),
+        }
+
+
+def type_sequences(agent, env: gym.Env, sequences: list[tuple[str, ...]], seed: int = 0) -> TypingResult:
+    """Type each sequence with the agent's test-time actions (see the module docstring).
+
+    ``env`` is a braille environment made with ``gym.make`` (its time limit
+    cuts each key's attempt).
+    """
+    keys = tuple(env.unwrapped.goal_keys)
+    for sequence in sequences:
+        unknown = set(sequence) - set(keys)
+        if unknown:
+            raise ValueError(f"keys {sorted(unknown)} are not among the task's keys {keys}")
+    rng = np.random.default_rng(seed)
+    result = TypingResult(keys=keys, sequences=[tuple(s) for s in sequences])
+    for number, sequence in enumerate(result.sequences):
+        typed, steps = [], []
+        for position, goal in enumerate(sequence):
+            options = {"goal_key": goal, "keep_pose": position > 0}
+            observation, _ = env.reset(seed=seed + number if position == 0 else None, options=options)
+            count, pressed = 0, NONE
+            while True:
+                action = agent.policy_action(observation, 0, explore=False, rng=rng)
+                observation, _, terminated, truncated, info = env.step(action)
+                count += 1
+                if terminated:
+                    pressed = info["pressed_key"] if info["pressed_key"] in keys else OTHER
+                    break
+                if truncated:
+                    break
+            typed.append(pressed)
+            steps.append(count)
+        result.typed.append(typed)
+        result.steps.append(steps)
+    return result
+
+
+def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
+    """The paper's typing evaluation of a run's last checkpoint, written to ``RUN_DIR/typing.json``.
+
+    Also writes ``typing_confusion.png``. For the alphabet tasks, ``sentences``
+    adds the typing of :data:`SENTENCES`.
+    """
+    import json
+    from pathlib import Path
+
+    from tactile_braille._io import atomic_path
+    from tactile_braille.agents.report import load_run
+
+    run_dir = Path(run_dir)
+    config, env, agent = load_run(run_dir)
+    keys = "alphabet" if "Alphabet" in config.task else "arrows"
+    result = type_sequences(agent, env, paper_sequences(keys), seed=seed)
+    output = {"task": config.task, "algo": config.algo, "seed": config.seed, **result.summary()}
+    output["confusion"] = {"rows": list(result.keys), "columns": list(result.columns),
+                           "counts": result.confusion().tolist()}  # fmt: skip
+    if keys == "alphabet" and sentences:
+        typed = type_sequences(agent, env, [text_keys(s) for s in SENTENCES], seed=seed + 1_000)
+        output["sentences"] = [
+            {"text": text, "typed": _as_text(keys_typed),
+             "accuracy": float(np.mean([a == b for a, b in zip(text_keys(text), keys_typed, strict=True)])),
+             "steps": int(sum(steps))}
+            for text, keys_typed, steps in zip(SENTENCES, typed.typed, typed.steps, strict=True)
+        ]  # fmt: skip
+    save_typing_confusion(result, run_dir / "typing_confusion.png",
+                          f"{config.task.split('/')[-1]}, {config.algo}: accuracy {result.accuracy:.3f}, "
+                          f"{result.total_steps} steps")  # fmt: skip
+    with atomic_path(run_dir / "typing.json") as temporary:
+        temporary.write_text(json.dumps(output, indent=2))
+    return output
+
+
+def _as_text(keys: list[str]) -> str:
+    """Typed keys as text: SPACE as a space, a wrong key outside the task or a time-out as ``_``."""
+    return "".join(" " if k == "SPACE" else k if len(k) == 1 else "_" for k in keys)
+
+
+def save_typing_confusion(result: TypingResult, path, title: str):
+    """The typing confusion matrix as a PNG (rows: goal key; columns: key pressed, OTHER, NONE)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tactile_braille.gallery import save_figure
+
+    matrix = result.confusion()
+    size = 2.5 + 0.28 * len(result.columns)
+    fig, ax = plt.subplots(figsize=(size, size * 0.9))
+    ax.imshow(np.where(matrix > 0, matrix, np.nan), cmap="viridis", interpolation="nearest")
+    ax.set_xticks(range(len(result.columns)), result.columns, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(result.keys)), result.keys, fontsize=7)
+    ax.set_xlabel("key pressed")
+    ax.set_ylabel("goal key")
+    for i, j in zip(*np.nonzero(matrix), strict=True):
+        ax.text(j, i, str(matrix[i, j]), ha="center", va="center", fontsize=6,
+                color="white" if i != j else "black")  # fmt: skip
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)
