@@ -22,6 +22,7 @@ from torch.distributions import Normal, TanhTransform, TransformedDistribution
 
 from tactile_braille import cli
 from tactile_braille.agents import (
+    AGENTS,
     DiscreteSACAgent,
     DiscreteSACConfig,
     DQNAgent,
@@ -597,7 +598,8 @@ def test_td3_training_bursts_checkpoints_and_resumes(env_datasets, tmp_path, rec
             assert math.isfinite(row["losses/qf_loss"]) and math.isfinite(row["losses/q_values"])
     files = run_files(run)
     assert files["replay"] == ["replay.1.npz"]
-    assert files["other"] == ["checkpoint.pt", "config.json", "progress.csv"]
+    assert files["other"] == ["checkpoint.pt", "config.json", "progress.csv", "snapshots"]
+    assert sorted(p.name for p in (run / "snapshots").iterdir()) == ["epoch_0000.pt", "epoch_0001.pt"]
     assert len(files["events"]) >= 1
 
     data = json.loads((run / "config.json").read_text())
@@ -723,3 +725,31 @@ def test_cli_train_argument_errors(argv, message, tmp_path, monkeypatch, capsys)
     captured = capsys.readouterr()
     assert "error" in captured.err and message in captured.err
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("algo", ["dqn", "sac"])
+def test_policy_snapshots_act_like_the_agent(algo, env_datasets):
+    task = CONTINUOUS_TASK if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
+    env = gym.make(task, dataset=env_datasets[task])
+    config = AGENTS[algo].config(hidden=(32,))
+    agent = AGENTS[algo].agent(env.observation_space, env.action_space, config)
+    fresh = AGENTS[algo].agent(env.observation_space, env.action_space, config)
+    snapshot = agent.policy_state_dict()
+    assert set(snapshot) == set(type(agent).policy_parts)  # no optimisers, no targets
+    fresh.load_policy_state_dict(snapshot)
+    observation, _ = env.reset(seed=4)
+    rng = np.random.default_rng(0)
+    np.testing.assert_array_equal(
+        agent.policy_action(observation, 0, explore=False, rng=rng),
+        fresh.policy_action(observation, 0, explore=False, rng=rng),
+    )
+    with pytest.raises(ValueError, match="policy snapshot lacks"):
+        fresh.load_policy_state_dict({})
+
+
+def test_snapshot_epochs_spread_from_first_to_last():
+    from tactile_braille.agents.train import snapshot_epochs
+
+    assert snapshot_epochs(25, 3) == {0, 12, 24}
+    assert snapshot_epochs(2, 3) == {0, 1}
+    assert snapshot_epochs(10, 0) == set()

@@ -48,6 +48,8 @@ class Agent:
     """
 
     checkpointed: ClassVar[tuple[str, ...]] = ()
+    policy_parts: ClassVar[tuple[str, ...]] = ()
+    """The parts that acting needs (a policy snapshot: no optimisers, no targets)."""
 
     def __init__(self, device: str | torch.device, precision: str) -> None:
         if precision not in PRECISIONS:
@@ -73,6 +75,21 @@ class Agent:
             part = getattr(self, name)
             state[name] = part.detach().clone() if isinstance(part, torch.Tensor) else part.state_dict()
         return state
+
+    def policy_state_dict(self) -> dict:
+        """What :meth:`policy_action` needs, for policy snapshots."""
+        parts = self.policy_parts
+        if getattr(getattr(self, "config", None), "shared_encoder", False):
+            parts = (*parts, "critics")  # the actor's encoder lives in the first critic
+        return {name: getattr(self, name).state_dict() for name in parts}
+
+    def load_policy_state_dict(self, state: dict) -> None:
+        """Restore a :meth:`policy_state_dict` (enough to act, not to train on)."""
+        missing = set(self.policy_parts) - set(state)
+        if missing:
+            raise ValueError(f"policy snapshot lacks {sorted(missing)} for {type(self).__name__}")
+        for name, part in state.items():
+            getattr(self, name).load_state_dict(part)
 
     def load_state_dict(self, state: dict) -> None:
         missing = set(self.checkpointed) - set(state)

@@ -57,6 +57,7 @@ class DQNAgent(Agent):
         precision: ``"fp32"`` or ``"bf16"`` (autocast in the update).
     """
 
+    policy_parts = ("q",)
     checkpointed = ("q", "target", "optimiser")
 
     def __init__(

@@ -61,6 +61,7 @@ class DiscreteSACAgent(Agent):
         precision: ``"fp32"`` or ``"bf16"`` (autocast in the update).
     """
 
+    policy_parts = ("actor",)
     checkpointed = (
         "actor", "critics", "targets", "log_alpha", "actor_optimiser", "critic_optimiser", "alpha_optimiser"
     )  # fmt: skip

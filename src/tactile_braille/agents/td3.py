@@ -74,6 +74,7 @@ class TD3Agent(Agent):
         precision: ``"fp32"`` or ``"bf16"`` (autocast in the update).
     """
 
+    policy_parts = ("actor",)
     checkpointed = (
         "actor", "actor_target", "critics", "critic_targets", "actor_optimiser", "critic_optimiser",
         "critic_updates",

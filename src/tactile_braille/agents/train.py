@@ -81,6 +81,8 @@ class TrainConfig:
         precision: ``fp32`` or ``bf16`` (autocast in the updates).
         threads: torch CPU threads.
         checkpoint_every: epochs between checkpoints.
+        snapshots: policy snapshots kept (``snapshots/epoch_NNNN.pt``), spread
+            evenly from the first epoch to the last (for trajectory figures).
         preset: name of the preset the settings came from (a record only).
         agent: the algorithm's hyperparameters (default: the paper's for ``algo``).
     """
@@ -103,6 +105,7 @@ class TrainConfig:
     precision: str = "fp32"
     threads: int = 2
     checkpoint_every: int = 1
+    snapshots: int = 3
     preset: str | None = None
     agent: AgentConfig | None = None
 
@@ -130,7 +133,7 @@ class TrainConfig:
                      "checkpoint_every", "threads"):  # fmt: skip
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
-        for name in ("start_steps", "updates_per_step"):
+        for name in ("start_steps", "updates_per_step", "snapshots"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
         if self.max_episode_steps is not None and self.max_episode_steps < 1:
@@ -325,6 +328,10 @@ def train(
                 bar.set_postfix(test_return=f"{tests['test/episodic_return']:.2f}",
                                 sps=f"{row['charts/SPS']:.0f}")  # fmt: skip
                 bar.update(1)
+            if epoch in snapshot_epochs(config.epochs, config.snapshots):
+                (run_dir / "snapshots").mkdir(exist_ok=True)
+                with atomic_path(run_dir / "snapshots" / f"epoch_{epoch:04d}.pt") as temporary:
+                    torch.save(agent.policy_state_dict(), temporary)
             if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
                 _save_checkpoint(run_dir, agent, buffer, rng, epoch, env_steps, updates)
     finally:
@@ -333,6 +340,13 @@ def train(
         if writer is not None:
             writer.close()
     return run_dir
+
+
+def snapshot_epochs(epochs: int, snapshots: int) -> set[int]:
+    """Epochs after which a policy snapshot is kept: ``snapshots`` of them, first to last."""
+    if snapshots <= 0:
+        return set()
+    return {round(float(e)) for e in np.linspace(0, epochs - 1, min(snapshots, epochs))}
 
 
 def _save_checkpoint(run_dir: Path, agent, buffer, rng, epoch: int, env_steps: int, updates: int) -> None:
