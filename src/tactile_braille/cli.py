@@ -173,6 +173,12 @@ def _report(args: argparse.Namespace) -> int:
         report = write_report(run, episodes=args.episodes)
         print(report.read_text())
         print(f"wrote {report} and {report.parent / 'curve.png'}")
+    if args.output is not None:
+        from tactile_braille.evaluation.report import write_report as write_results
+
+        results = write_results(args.runs, args.output, title=args.title)
+        print(results.read_text().split("![training curves]")[0])
+        print(f"wrote {results} and its figures")
     return 0
 
 
@@ -278,9 +284,16 @@ def build_parser() -> argparse.ArgumentParser:
     trainer.add_argument("--quiet", action="store_true", help="no progress bar")
     trainer.set_defaults(handler=_train)
 
-    report = commands.add_parser("report", help="evaluate a training run and write its report and curve")
+    report = commands.add_parser("report", help="reports of training runs (and over runs and seeds)")
     report.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
     report.add_argument("--episodes", type=int, default=100, help="final test episodes (default 100)")
+    report.add_argument(
+        "--output",
+        type=Path,
+        default=None,
+        help="also write OUTPUT/results.md over all runs (Table III, curves, typing, Figure 4)",
+    )
+    report.add_argument("--title", default="Results", help="title of results.md")
     report.set_defaults(handler=_report)
 
     evaluate = commands.add_parser("evaluate", help="the paper's typing evaluation of a training run")

@@ -1,0 +1,326 @@
+"""Reports over runs and seeds: the paper's Table III with confidence intervals, curves, trajectories.
+
+``tactile-braille report RUN_DIR... --output DIR`` groups runs by (task,
+algorithm), evaluates each (typing, if not done yet) and writes
+``DIR/results.md``: a table in the shape of the paper's Table III, the
+paper's numbers alongside, with the mean over seeds, its 95 % bootstrap
+confidence interval and the interquartile mean (IQM, the mean of the middle
+half, as rliable recommends for few seeds); training curves with the seed
+range, the convergence marker and the original release's logged run overlaid;
+typing confusion matrices; and the paper's Figure 4 (the sensor's path to the
+goal at the start, middle and end of training).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from tactile_braille._io import atomic_path
+from tactile_braille.agents.report import convergence_epoch
+from tactile_braille.agents.train import TrainConfig, read_progress
+
+ALGO_NAMES = {"dqn": "DQN", "sac_discrete": "SAC_DISC", "sac": "SAC", "td3": "TD3"}
+TASK_NAMES = {
+    "DiscreteArrows-v0": "disc arrow", "DiscreteAlphabet-v0": "disc alpha",
+    "ContinuousArrows-v0": "cont arrow", "ContinuousAlphabet-v0": "cont alpha",
+}  # fmt: skip
+PAPER_TABLE: dict[tuple[str, str, str], tuple[int, float, int]] = {
+    ("sim", "DiscreteArrows-v0", "dqn"): (230, 1.0, 8),
+    ("sim", "DiscreteArrows-v0", "sac_discrete"): (234, 1.0, 8),
+    ("sim", "DiscreteAlphabet-v0", "dqn"): (1722, 0.981, 45),
+    ("sim", "DiscreteAlphabet-v0", "sac_discrete"): (1649, 0.940, 39),
+    ("sim", "ContinuousArrows-v0", "td3"): (140, 0.906, 60),
+    ("sim", "ContinuousArrows-v0", "sac"): (133, 1.0, 25),
+    ("sim", "ContinuousAlphabet-v0", "td3"): (1169, 0.811, 1246),
+    ("sim", "ContinuousAlphabet-v0", "sac"): (1193, 0.933, 872),
+    ("robot", "DiscreteArrows-v0", "dqn"): (246, 1.0, 8),
+    ("robot", "DiscreteArrows-v0", "sac_discrete"): (246, 1.0, 6),
+    ("robot", "DiscreteAlphabet-v0", "dqn"): (1722, 0.992, 24),
+    ("robot", "DiscreteAlphabet-v0", "sac_discrete"): (1649, 0.985, 32),
+    ("robot", "ContinuousArrows-v0", "sac"): (364, 0.938, 76),
+}
+"""The paper's Table III: (platform, task, algo) -> (typing steps, typing accuracy, convergence epoch)."""
+
+
+# ------------------------------------------------------------------ statistics
+def bootstrap_ci(
+    values, confidence: float = 0.95, resamples: int = 10_000, seed: int = 0
+) -> tuple[float, float]:
+    """Percentile bootstrap confidence interval of the mean (NaN, NaN for no values)."""
+    values = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    if values.size == 0:
+        return float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    means = values[rng.integers(values.size, size=(resamples, values.size))].mean(axis=1)
+    tail = (1.0 - confidence) / 2 * 100
+    low, high = np.percentile(means, [tail, 100 - tail])
+    return float(low), float(high)
+
+
+def iqm(values) -> float:
+    """Interquartile mean: the mean of the middle half (floor(n/4) values trimmed at each end)."""
+    values = np.sort(np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float))
+    if values.size == 0:
+        return float("nan")
+    cut = values.size // 4
+    return float(values[cut : values.size - cut].mean())
+
+
+# ------------------------------------------------------------------ runs
+@dataclass
+class RunRecord:
+    """One training run as the report sees it."""
+
+    path: Path
+    task: str
+    algo: str
+    seed: int
+    returns: np.ndarray
+    typing: dict | None = None
+    config: TrainConfig | None = field(default=None, repr=False)
+
+    @property
+    def convergence(self) -> int | None:
+        return convergence_epoch(list(self.returns))
+
+    @property
+    def reached_095(self) -> int | None:
+        return convergence_epoch(list(self.returns), level=0.95)
+
+
+def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
+    """Read runs (and their typing evaluations, running them where missing)."""
+    from tactile_braille.evaluation.protocol import evaluate_typing
+
+    records = []
+    for run_dir in map(Path, run_dirs):
+        if not (run_dir / "config.json").exists():
+            raise FileNotFoundError(f"{run_dir} is not a training run (no config.json)")
+        config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
+        rows = read_progress(run_dir)
+        typing_file = run_dir / "typing.json"
+        typing = None
+        if typing_file.exists():
+            typing = json.loads(typing_file.read_text())
+        elif evaluate_missing and (run_dir / "checkpoint.pt").exists():
+            typing = evaluate_typing(run_dir)
+        records.append(RunRecord(
+            path=run_dir, task=config.task.split("/")[-1], algo=config.algo, seed=config.seed,
+            returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
+        ))  # fmt: skip
+    return records
+
+
+def group(records: list[RunRecord]) -> dict[tuple[str, str], list[RunRecord]]:
+    """Records by (task, algo), in the paper's order."""
+    order = list(TASK_NAMES)
+    groups: dict[tuple[str, str], list[RunRecord]] = {}
+    for record in sorted(
+        records, key=lambda r: (order.index(r.task) if r.task in order else 99, r.algo, r.seed)
+    ):
+        groups.setdefault((record.task, record.algo), []).append(record)
+    return groups
+
+
+def original_curves() -> dict[tuple[str, str, str], tuple[np.ndarray, np.ndarray]]:
+    """The original release's logged test returns: (platform, task, algo) -> (epochs, returns)."""
+    table = resources.files("tactile_braille.evaluation") / "reference" / "original_runs.csv"
+    curves: dict[tuple[str, str, str], list[tuple[int, float]]] = {}
+    with table.open(newline="") as handle:
+        for row in csv.DictReader(handle):
+            key = (row["platform"], row["task"], row["algo"])
+            curves.setdefault(key, []).append((int(row["epoch"]), float(row["test_return"])))
+    return {key: (np.array([e for e, _ in v]), np.array([r for _, r in v])) for key, v in curves.items()}
+
+
+# ------------------------------------------------------------------ table
+def _stat(values, digits: int = 1) -> str:
+    values = [v for v in values if v is not None and np.isfinite(v)]
+    if not values:
+        return "-"
+    low, high = bootstrap_ci(values)
+    text = f"{np.mean(values):.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+    return text + (f"; IQM {iqm(values):.{digits}f}" if len(values) >= 4 else "")
+
+
+def results_table(groups: dict[tuple[str, str], list[RunRecord]]) -> str:
+    """Markdown in the shape of the paper's Table III, ours (mean [95 % CI]) beside the paper's."""
+    lines = [
+        "| env | task | algo | seeds | steps | accuracy | convergence epoch | first epoch >= 0.95 "
+        "| paper: steps | paper: accuracy | paper: convergence |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (task, algo), records in groups.items():
+        typed = [r.typing for r in records if r.typing]
+        steps = _stat([t["total_steps"] for t in typed], 0)
+        accuracy = _stat([t["accuracy"] for t in typed], 3)
+        convergence = _stat([r.convergence for r in records], 1)
+        reached = [r.reached_095 for r in records]
+        reached_text = _stat(reached, 1) if all(e is not None for e in reached) else (
+            f"{sum(e is not None for e in reached)}/{len(reached)} reached"
+            + (f"; {_stat(reached, 1)}" if any(e is not None for e in reached) else "")
+        )  # fmt: skip
+        paper = PAPER_TABLE.get(("sim", task, algo))
+        paper_cells = [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
+        lines.append(
+            f"| sim | {TASK_NAMES.get(task, task)} | {ALGO_NAMES.get(algo, algo)} | {len(records)} | {steps} "
+            f"| {accuracy} | {convergence} | {reached_text} | " + " | ".join(paper_cells) + " |"
+        )
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ figures
+def plot_curves(groups: dict[tuple[str, str], list[RunRecord]], path: str | Path) -> Path:
+    """Test return per epoch for each group: seeds, their mean and range, convergence, the original run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tactile_braille.gallery import save_figure
+
+    originals = original_curves()
+    count = len(groups)
+    columns = min(count, 2)
+    rows = int(np.ceil(count / columns))
+    fig, axes = plt.subplots(rows, columns, figsize=(6.2 * columns, 3.6 * rows), squeeze=False)
+    for ax, ((task, algo), records) in zip(axes.ravel(), groups.items(), strict=False):
+        length = min(len(r.returns) for r in records)
+        curves = np.stack([r.returns[:length] for r in records])
+        epochs = np.arange(length)
+        for record in records:
+            ax.plot(np.arange(len(record.returns)), record.returns, lw=0.7, alpha=0.45)
+        ax.fill_between(epochs, curves.min(0), curves.max(0), alpha=0.2, label="seed range")
+        ax.plot(epochs, curves.mean(0), lw=2, color="C0", label=f"mean of {len(records)} seeds")
+        convergence = [r.convergence for r in records if r.convergence is not None]
+        if convergence:
+            ax.axvline(np.mean(convergence), color="grey", ls="--",
+                       label=f"convergence (paper's rule): {np.mean(convergence):.1f}")  # fmt: skip
+        original = originals.get(("sim", task, algo))
+        if original is not None:
+            shown = original[0] < max(length * 1.5, 10)
+            ax.plot(original[0][shown], original[1][shown], color="black", lw=1, ls=":",
+                    label="original release (sim, seed 1)")  # fmt: skip
+        paper = PAPER_TABLE.get(("sim", task, algo))
+        title = f"{task}, {ALGO_NAMES.get(algo, algo)}"
+        ax.set_title(title + (f" (paper: converged at epoch {paper[2]})" if paper else ""), fontsize=9)
+        ax.set_xlabel("epoch (250 steps)")
+        ax.set_ylabel("test return")
+        ax.set_ylim(-0.05, 1.05)
+        ax.legend(fontsize=7, loc="lower right")
+    for ax in axes.ravel()[count:]:
+        ax.axis("off")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def plot_trajectories(record: RunRecord, path: str | Path, goals: int = 3, seed: int = 7) -> Path | None:
+    """The paper's Figure 4: the sensor's path to a goal with the policies of the start, middle and end.
+
+    Needs the run's policy snapshots; returns None without them.
+    """
+    import gymnasium as gym
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import torch
+
+    from tactile_braille.agents.train import make_agent
+    from tactile_braille.gallery import save_figure
+
+    snapshots = sorted((record.path / "snapshots").glob("epoch_*.pt"))
+    if not snapshots or record.config is None:
+        return None
+    chosen = (
+        [snapshots[0], snapshots[len(snapshots) // 2], snapshots[-1]] if len(snapshots) >= 3 else snapshots
+    )
+    config = record.config
+    kwargs = {"backend": config.backend, "render_mode": "rgb_array"}
+    if config.dataset is not None:
+        kwargs["dataset"] = config.dataset
+    env = gym.make(config.task, **kwargs)
+    agent = make_agent(config, env)
+    rng = np.random.default_rng(seed)
+    goal_keys = env.unwrapped.goal_keys
+    episode_goals = [goal_keys[i] for i in rng.choice(len(goal_keys), size=goals, replace=False)]
+    fig, axes = plt.subplots(goals, len(chosen), figsize=(3.4 * len(chosen), 2.9 * goals), squeeze=False)
+    for column, snapshot in enumerate(chosen):
+        agent.load_policy_state_dict(torch.load(snapshot, weights_only=False, map_location=agent.device))
+        epoch = int(snapshot.stem.split("_")[1])
+        for row, goal in enumerate(episode_goals):
+            observation, _ = env.reset(seed=seed + row, options={"goal_key": goal})
+            done, steps, info = False, 0, {}
+            while not done:
+                action = agent.policy_action(observation, 0, explore=False, rng=rng)
+                observation, _, terminated, truncated, info = env.step(action)
+                done, steps = terminated or truncated, steps + 1
+            ax = axes[row, column]
+            ax.imshow(env.render())
+            ax.axis("off")
+            pressed = info.get("pressed_key") or "nothing"
+            ax.set_title(f"epoch {epoch}: goal {goal}, pressed {pressed}, {steps} steps", fontsize=7)
+    fig.suptitle(f"{record.task}, {ALGO_NAMES.get(record.algo, record.algo)}, seed {record.seed}", fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def write_report(run_dirs, output: str | Path, title: str = "Results") -> Path:
+    """Evaluate the runs and write ``output/results.md`` with its figures; returns its path."""
+    from tactile_braille.evaluation.protocol import save_typing_confusion
+
+    output = Path(output)
+    output.mkdir(parents=True, exist_ok=True)
+    groups = group(load_records(run_dirs))
+    if not groups:
+        raise ValueError("no runs to report")
+    plot_curves(groups, output / "curves.png")
+    lines = [
+        f"# {title}", "",
+        "Generated by `tactile-braille report` from the runs listed below. Each cell: mean over seeds "
+        "[95 % bootstrap confidence interval] (and the interquartile mean from 4 seeds up). Typing "
+        "steps and accuracy come from the paper's typing evaluation of each run's last checkpoint "
+        "(`tactile-braille evaluate`); convergence is the paper's rule (first epoch reaching 95 % of "
+        "the run's best test return) and, stricter, the first epoch whose test return reaches 0.95.",
+        "", results_table(groups), "", "![training curves](curves.png)", "",
+    ]  # fmt: skip
+    for (task, algo), records in groups.items():
+        name = f"{task.split('-')[0]}__{algo}"
+        lines += [f"## {task}, {ALGO_NAMES.get(algo, algo)}", ""]
+        lines += [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs, convergence {r.convergence}, "
+                  f"typing accuracy {r.typing['accuracy']:.3f} in {r.typing['total_steps']} steps"
+                  if r.typing else f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs (no checkpoint)"
+                  for r in records]  # fmt: skip
+        typed = [r for r in records if r.typing]
+        if typed:
+            confusion = np.sum([r.typing["confusion"]["counts"] for r in typed], axis=0)
+            first = typed[0].typing["confusion"]
+            merged = _ConfusionOnly(tuple(first["rows"]), tuple(first["columns"]), confusion)
+            caption = f"{task}, {ALGO_NAMES.get(algo, algo)}: typing over {len(typed)} seeds"
+            save_typing_confusion(merged, output / f"confusion_{name}.png", caption)
+            lines += ["", f"![typing confusion](confusion_{name}.png)"]
+        if plot_trajectories(records[0], output / f"trajectories_{name}.png") is not None:
+            lines += ["", f"![trajectories](trajectories_{name}.png)"]
+        lines.append("")
+    report = output / "results.md"
+    with atomic_path(report) as temporary:
+        temporary.write_text("\n".join(lines))
+    return report
+
+
+@dataclass
+class _ConfusionOnly:
+    """Enough of a TypingResult to draw a summed confusion matrix."""
+
+    keys: tuple[str, ...]
+    columns: tuple[str, ...]
+    matrix: np.ndarray
+
+    def confusion(self) -> np.ndarray:
+        return self.matrix

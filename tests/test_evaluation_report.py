@@ -1,0 +1,104 @@
+"""Reports over runs and seeds: statistics with known answers, the table, the figures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tactile_braille.agents import TrainConfig, train
+from tactile_braille.evaluation.report import (
+    PAPER_TABLE,
+    RunRecord,
+    bootstrap_ci,
+    group,
+    iqm,
+    load_records,
+    original_curves,
+    results_table,
+    write_report,
+)
+
+
+def test_bootstrap_ci_brackets_the_mean_and_shrinks_with_more_data():
+    rng = np.random.default_rng(0)
+    small, large = rng.normal(1.0, 1.0, 10), rng.normal(1.0, 1.0, 1000)
+    low, high = bootstrap_ci(small)
+    assert low < small.mean() < high
+    low_large, high_large = bootstrap_ci(large)
+    assert high_large - low_large < (high - low) / 5  # width ~ 1/sqrt(n)
+    assert low_large < 1.0 < high_large
+    assert bootstrap_ci([2.0, 2.0, 2.0]) == (2.0, 2.0)
+    assert all(np.isnan(bootstrap_ci([])))
+    assert bootstrap_ci([1.0, None, 3.0]) != (np.nan, np.nan)  # None (not reached) is skipped
+
+
+def test_iqm_trims_a_quarter_at_each_end():
+    assert iqm([1, 2, 3, 4, 5, 6, 7, 100]) == pytest.approx(np.mean([3, 4, 5, 6]))
+    assert iqm([1.0, 2.0, 3.0]) == 2.0  # fewer than 4 values: nothing to trim
+    assert np.isnan(iqm([]))
+
+
+def record(task, algo, seed, returns, accuracy=None, steps=None):
+    typing = None if accuracy is None else {"accuracy": accuracy, "total_steps": steps}
+    return RunRecord(path=f"runs/{task}/{seed}", task=task, algo=algo, seed=seed, returns=np.array(returns),
+                     typing=typing)  # fmt: skip
+
+
+def test_results_table_has_the_papers_shape_and_numbers():
+    records = [
+        record("DiscreteArrows-v0", "dqn", 0, [0.2, 0.96, 1.0], 1.0, 240),
+        record("DiscreteArrows-v0", "dqn", 1, [0.1, 0.5, 1.0], 1.0, 250),
+        record("DiscreteAlphabet-v0", "dqn", 0, [0.1, 0.5, 0.9], 0.9, 1800),
+        record("DiscreteArrows-v0", "sac_discrete", 0, [0.0, 0.2, 0.5], 0.5, 400),
+    ]
+    groups = group(records)
+    assert list(groups) == [("DiscreteArrows-v0", "dqn"), ("DiscreteArrows-v0", "sac_discrete"),
+                            ("DiscreteAlphabet-v0", "dqn")]  # fmt: skip
+    table = results_table(groups).splitlines()
+    assert table[0].count("|") == 12
+    arrows_dqn = table[2]
+    assert "| disc arrow | DQN | 2 | 245 [240, 250] | 1.000 [1.000, 1.000] |" in arrows_dqn
+    assert "1.5 [1.0, 2.0]" in arrows_dqn  # convergence epochs 1 and 2 (95 % of 1.0)
+    assert arrows_dqn.endswith("| 230 | 1.000 | 8 |")  # the paper's Table III
+    assert "0/1 reached" in table[3]  # discrete SAC never reached 0.95
+    assert table[4].endswith("| 1722 | 0.981 | 45 |")
+
+
+def test_original_curves_are_vendored():
+    curves = original_curves()
+    epochs, returns = curves[("sim", "DiscreteArrows-v0", "dqn")]
+    assert list(epochs) == list(range(24))  # the log holds 24 epochs, counted from 0 here
+    assert np.all((returns >= 0) & (returns <= 1))
+    sim = {key for key in curves if key[0] == "sim"}
+    assert sim == {
+        ("sim", task, algo)
+        for task in ("DiscreteArrows-v0", "DiscreteAlphabet-v0")
+        for algo in ("dqn", "sac_discrete")
+    } | {("sim", "ContinuousArrows-v0", "sac"), ("sim", "ContinuousArrows-v0", "td3")}
+    assert {key for key in curves if key[0] == "robot"} <= set(PAPER_TABLE)
+
+
+def test_write_report_over_two_seeds(env_datasets, tmp_path):
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+    runs = []
+    for seed in (0, 1):
+        config = TrainConfig(
+            seed=seed, epochs=3, steps_per_epoch=30, start_steps=20, updates_per_step=1, test_episodes=2,
+            replay_capacity=500, dataset=dataset, threads=1,
+        )  # fmt: skip
+        runs.append(train(config, run_dir=tmp_path / f"run{seed}", progress=False))
+    report = write_report(runs, tmp_path / "report", title="Two seeds")
+    text = report.read_text()
+    assert text.startswith("# Two seeds")
+    assert "| sim | disc arrow | DQN | 2 |" in text
+    for name in ("curves.png", "confusion_DiscreteArrows__dqn.png", "trajectories_DiscreteArrows__dqn.png"):
+        assert (tmp_path / "report" / name).read_bytes()[:4] == b"\x89PNG", name
+        assert f"]({name})" in text
+    typing = json.loads((runs[0] / "typing.json").read_text())  # evaluated on the way
+    assert typing["keys_asked"] == 96 and 0.0 <= typing["accuracy"] <= 1.0
+    assert sum(map(sum, typing["confusion"]["counts"])) == 96
+    assert [r.seed for r in load_records(runs)] == [0, 1]
+    with pytest.raises(FileNotFoundError, match="not a training run"):
+        load_records([tmp_path])
