@@ -32,7 +32,9 @@ run: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"
 
+# The slow tests include a sweep on a local Ray: the optional `sweep` extra.
 test-slow: $(STAMP)
+	$(PY) -m pip install --quiet -e ".[dev,sweep]"
 	$(PY) -m pytest -q -m slow
 
 lint: $(STAMP)

@@ -196,6 +196,55 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep_overrides(args: argparse.Namespace) -> dict:
+    return {name: getattr(args, name) for name in ("epochs", "precision", "backend", "threads")
+            if getattr(args, name, None) is not None}  # fmt: skip
+
+
+def _run_sweep(args: argparse.Namespace, trials) -> int:
+    from tactile_braille.evaluation.report import write_report
+    from tactile_braille.sweep import sweep
+
+    use_ray = {"auto": None, "yes": True, "no": False}[args.ray]
+    runs = sweep(trials, args.root, use_ray=use_ray, address=args.address, cpus_per_trial=args.cpus_per_trial,
+                 max_failures=args.max_failures)  # fmt: skip
+    if args.report is not None:
+        report = write_report(runs, args.report, title=args.title)
+        print(f"wrote {report}")
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from tactile_braille.sweep import plan
+
+    return _run_sweep(args, plan(args.tasks, args.algos, args.seeds, args.preset, **_sweep_overrides(args)))
+
+
+def _benchmark(args: argparse.Namespace) -> int:
+    from tactile_braille.sweep import PAPER_SIM_RUNS, Trial
+
+    if not args.paper:
+        raise ValueError("say which benchmark: --paper (the simulated part of the paper's Table III)")
+    overrides = _sweep_overrides(args)
+    trials = [Trial(task, algo, seed, "paper", overrides) for task, algo in PAPER_SIM_RUNS
+              for seed in range(args.num_seeds)]  # fmt: skip
+    args.report = args.report or Path(args.root) / "report"
+    return _run_sweep(args, trials)
+
+
+def _add_sweep_options(parser: argparse.ArgumentParser, root: str) -> None:
+    parser.add_argument("--epochs", type=int, default=None, help="default: each preset's")
+    parser.add_argument("--precision", choices=("fp32", "bf16"), default=None)
+    parser.add_argument("--threads", type=int, default=None, help="torch threads per trial")
+    parser.add_argument("--root", type=Path, default=Path(root), help=f"run folders go here (default {root})")
+    parser.add_argument("--ray", choices=("auto", "yes", "no"), default="auto",
+                        help="run trials on Ray Tune (auto: when installed)")  # fmt: skip
+    parser.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+    parser.add_argument("--cpus-per-trial", type=float, default=2)
+    parser.add_argument("--max-failures", type=int, default=2, help="retries of a failed trial")
+    parser.add_argument("--title", default="Results", help="title of the report")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``tactile-braille``."""
     parser = argparse.ArgumentParser(
@@ -301,6 +350,25 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--no-sentences", action="store_true", help="alphabet tasks: skip the sentences")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the start poses")
     evaluate.set_defaults(handler=_evaluate)
+
+    sweeper = commands.add_parser("sweep", help="train tasks x algorithms x seeds (Ray Tune when installed)")
+    sweeper.add_argument(
+        "--tasks", nargs="+", required=True, help="e.g. DiscreteArrows-v0 DiscreteAlphabet-v0"
+    )
+    sweeper.add_argument("--algos", nargs="+", required=True, choices=("dqn", "sac_discrete", "sac", "td3"))
+    sweeper.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    sweeper.add_argument("--preset", choices=("paper", "released"), default="paper")
+    sweeper.add_argument("--backend", choices=("dataset", "render"), default=None)
+    sweeper.add_argument("--report", type=Path, default=None, help="write REPORT/results.md over the runs")
+    _add_sweep_options(sweeper, "runs/sweep")
+    sweeper.set_defaults(handler=_sweep)
+
+    bench = commands.add_parser("benchmark", help="reproduce the simulated part of the paper's Table III")
+    bench.add_argument("--paper", action="store_true", help="the paper's 8 simulated task x algorithm runs")
+    bench.add_argument("--num-seeds", type=int, default=3)
+    bench.add_argument("--report", type=Path, default=None, help="default: ROOT/report")
+    _add_sweep_options(bench, "runs/paper-benchmark")
+    bench.set_defaults(handler=_benchmark)
 
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
     data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))

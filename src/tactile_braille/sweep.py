@@ -1,0 +1,157 @@
+"""Sweeps: tasks x algorithms x seeds, on Ray Tune when it is installed, one after another otherwise.
+
+Every trial is an ordinary training run in ``ROOT/{task}__{algo}__{seed}``.
+A trial whose folder holds a run is resumed (a finished one returns at once),
+so a sweep is resumable as a whole: run the same command again after a crash.
+Failed trials are retried (``max_failures`` times), each retry resuming from
+the trial's last checkpoint. With Ray (``pip install tactile_braille[sweep]``)
+trials run in parallel on the local machine, or on a cluster with
+``address="ray://..."``; each trial asks for ``cpus_per_trial`` CPUs.
+
+>>> [t.name for t in plan(["DiscreteArrows-v0"], ["dqn", "sac"], [0, 1])]
+['DiscreteArrows-v0__dqn__0', 'DiscreteArrows-v0__dqn__1']
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tactile_braille.agents.presets import preset_config
+from tactile_braille.agents.train import AGENTS, train
+
+PAPER_SIM_RUNS = (
+    ("DiscreteArrows-v0", "dqn"), ("DiscreteArrows-v0", "sac_discrete"),
+    ("DiscreteAlphabet-v0", "dqn"), ("DiscreteAlphabet-v0", "sac_discrete"),
+    ("ContinuousArrows-v0", "td3"), ("ContinuousArrows-v0", "sac"),
+    ("ContinuousAlphabet-v0", "td3"), ("ContinuousAlphabet-v0", "sac"),
+)  # fmt: skip
+"""The simulated rows of the paper's Table III."""
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One training run of a sweep."""
+
+    task: str
+    algo: str
+    seed: int
+    preset: str = "paper"
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return f"{self.task}__{self.algo}__{self.seed}"
+
+    def config(self):
+        task = self.task if "/" in self.task else f"tactile_braille/{self.task}"
+        return preset_config(self.preset, task, self.algo, seed=self.seed, **dict(self.overrides))
+
+
+def plan(
+    tasks: Sequence[str], algos: Sequence[str], seeds: Sequence[int], preset: str = "paper", **overrides: Any
+) -> list[Trial]:
+    """Every (task, algo, seed) whose action kinds match (DQN on discrete tasks, SAC on continuous...)."""
+    trials = []
+    for task in tasks:
+        for algo in algos:
+            if algo not in AGENTS:
+                raise ValueError(f"unknown algorithm {algo!r}; choose from {tuple(AGENTS)}")
+            if ("Continuous" in task) != AGENTS[algo].continuous:
+                continue
+            trials.extend(Trial(task, algo, seed, preset, dict(overrides)) for seed in seeds)
+    if not trials:
+        raise ValueError(f"no algorithm of {list(algos)} acts in the tasks {list(tasks)}")
+    for trial in trials:
+        trial.config()  # bad settings fail here, before any trial starts
+    return trials
+
+
+def run_trial(trial: Trial, root: str | Path, progress: bool = False) -> Path:
+    """Train the trial in ``root/<name>``, resuming what is there."""
+    run_dir = Path(root) / trial.name
+    if (run_dir / "config.json").exists():
+        return train(run_dir=run_dir, resume=True, progress=progress)
+    return train(trial.config(), run_dir=run_dir, progress=progress)
+
+
+def ray_available() -> bool:
+    return importlib.util.find_spec("ray") is not None
+
+
+def sweep(
+    trials: Sequence[Trial],
+    root: str | Path,
+    use_ray: bool | None = None,
+    address: str | None = None,
+    cpus_per_trial: float = 2,
+    max_failures: int = 2,
+    progress: bool = True,
+) -> list[Path]:
+    """Run the trials; returns their run folders (in the order given).
+
+    ``use_ray=None`` uses Ray when it is installed.
+    """
+    root = Path(root).resolve()
+    root.mkdir(parents=True, exist_ok=True)
+    if use_ray is None:
+        use_ray = ray_available()
+    if use_ray:
+        _sweep_on_ray(trials, root, address, cpus_per_trial, max_failures)
+    else:
+        for number, trial in enumerate(trials, start=1):
+            if progress:
+                print(f"[{number}/{len(trials)}] {trial.name}")
+            for attempt in range(max_failures + 1):
+                try:
+                    run_trial(trial, root, progress=progress)
+                    break
+                except Exception as error:  # a retry resumes from the last checkpoint
+                    if attempt == max_failures:
+                        raise RuntimeError(f"trial {trial.name} failed {attempt + 1} times") from error
+                    print(f"trial {trial.name} failed ({error!r}); retrying from its last checkpoint")
+    return [root / trial.name for trial in trials]
+
+
+def _sweep_on_ray(trials, root: Path, address, cpus_per_trial: float, max_failures: int) -> None:
+    import ray
+    from ray import tune
+
+    def trainable(space: dict) -> None:
+        import torch
+
+        trial = Trial(**space["trial"])
+        torch.set_num_threads(max(int(cpus_per_trial), 1))
+        run_dir = run_trial(trial, space["root"])
+        from tactile_braille.agents.train import read_progress
+
+        rows = read_progress(run_dir)
+        tune.report({"test_return": rows[-1]["test/episodic_return"], "epochs": len(rows)})
+
+    started = False
+    if not ray.is_initialized():
+        ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        started = True
+    try:
+        space = {"trial": tune.grid_search([dataclasses.asdict(t) for t in trials]), "root": str(root)}
+        tuner = tune.Tuner(
+            tune.with_resources(trainable, {"cpu": cpus_per_trial}),
+            param_space=space,
+            run_config=tune.RunConfig(
+                name="tactile_braille_sweep",
+                storage_path=str(root / "_ray"),
+                failure_config=tune.FailureConfig(max_failures=max_failures),
+                verbose=0,
+            ),
+        )
+        results = tuner.fit()
+        failed = [result for result in results if result.error is not None]
+        if failed:
+            raise RuntimeError(f"{len(failed)} trials failed on Ray; first error: {failed[0].error}")
+    finally:
+        if started:
+            ray.shutdown()

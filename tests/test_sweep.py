@@ -1,0 +1,72 @@
+"""Sweeps: planning, resumable sequential runs with retries, and two tiny trials on a local Ray."""
+
+from __future__ import annotations
+
+import pytest
+
+from tactile_braille.agents import read_progress
+from tactile_braille.sweep import Trial, plan, run_trial, sweep
+
+TINY = {"epochs": 1, "steps_per_epoch": 30, "start_steps": 20, "test_episodes": 1, "replay_capacity": 500,
+        "threads": 1, "updates_per_step": 1}  # fmt: skip
+
+
+def test_plan_pairs_algorithms_with_matching_tasks():
+    trials = plan(["DiscreteArrows-v0", "ContinuousArrows-v0"], ["dqn", "sac"], [0, 1], epochs=3)
+    assert [t.name for t in trials] == [
+        "DiscreteArrows-v0__dqn__0", "DiscreteArrows-v0__dqn__1",
+        "ContinuousArrows-v0__sac__0", "ContinuousArrows-v0__sac__1",
+    ]  # fmt: skip
+    assert trials[0].config().epochs == 3 and trials[2].config().agent.gamma == 0.95
+    with pytest.raises(ValueError, match="unknown algorithm"):
+        plan(["DiscreteArrows-v0"], ["ppo"], [0])
+    with pytest.raises(ValueError, match="no algorithm"):
+        plan(["DiscreteArrows-v0"], ["sac"], [0])
+    with pytest.raises(ValueError, match="epochs"):
+        plan(["DiscreteArrows-v0"], ["dqn"], [0], epochs=0)  # bad settings fail before any trial
+
+
+def test_sequential_sweep_is_resumable_and_retries(env_datasets, tmp_path, monkeypatch):
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+    trials = plan(["DiscreteArrows-v0"], ["dqn"], [0, 1], dataset=dataset, **TINY)
+    runs = sweep(trials, tmp_path, use_ray=False, progress=False)
+    assert [len(read_progress(run)) for run in runs] == [1, 1]
+    before = (runs[0] / "progress.csv").read_text()
+    sweep(trials, tmp_path, use_ray=False, progress=False)  # finished trials return at once
+    assert (runs[0] / "progress.csv").read_text() == before
+
+    from tactile_braille import sweep as sweep_module
+
+    calls = []
+
+    def flaky(trial, root, progress=False):
+        calls.append(trial.name)
+        if len(calls) == 1:
+            raise RuntimeError("the robot lost power")
+        return run_trial(trial, root, progress)
+
+    monkeypatch.setattr(sweep_module, "run_trial", flaky)
+    more = [Trial("DiscreteArrows-v0", "dqn", 2, "paper", {**TINY, "dataset": dataset})]
+    sweep(more, tmp_path, use_ray=False, progress=False, max_failures=1)
+    assert calls == ["DiscreteArrows-v0__dqn__2"] * 2
+    assert len(read_progress(tmp_path / "DiscreteArrows-v0__dqn__2")) == 1
+
+    def broken(trial, root, progress=False):
+        raise RuntimeError("always")
+
+    monkeypatch.setattr(sweep_module, "run_trial", broken)
+    with pytest.raises(RuntimeError, match="failed 2 times"):
+        sweep(more, tmp_path, use_ray=False, progress=False, max_failures=1)
+
+
+@pytest.mark.slow
+def test_two_tiny_trials_on_a_local_ray(env_datasets, tmp_path):
+    """About a minute alone (Ray's start and two workers importing torch); `make test-slow`."""
+    pytest.importorskip("ray")
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+    trials = plan(["DiscreteArrows-v0"], ["dqn"], [0, 1], dataset=dataset, **TINY)
+    runs = sweep(trials, tmp_path, use_ray=True, cpus_per_trial=1, progress=False)
+    for run, seed in zip(runs, (0, 1), strict=True):
+        rows = read_progress(run)
+        assert len(rows) == 1 and rows[0]["env_steps"] == 30
+        assert f"__{seed}" in run.name
