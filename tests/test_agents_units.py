@@ -753,3 +753,19 @@ def test_snapshot_epochs_spread_from_first_to_last():
     assert snapshot_epochs(25, 3) == {0, 12, 24}
     assert snapshot_epochs(2, 3) == {0, 1}
     assert snapshot_epochs(10, 0) == set()
+
+
+def test_the_run_seed_fixes_the_initial_weights(env_datasets, tmp_path):
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+
+    def first_weights(seed: int, name: str) -> torch.Tensor:
+        config = TrainConfig(seed=seed, epochs=1, steps_per_epoch=5, start_steps=5, test_episodes=1,
+                             replay_capacity=100, dataset=dataset, threads=1, snapshots=1,
+                             agent=DQNConfig(hidden=(16,)))  # fmt: skip
+        torch.manual_seed(1234 + len(name))  # whatever the global generator holds before
+        run = train(config, run_dir=tmp_path / name, progress=False)
+        snapshot = torch.load(run / "snapshots" / "epoch_0000.pt", weights_only=False)
+        return snapshot["q"]["trunk.encoder.layers.0.weight"]
+
+    assert torch.equal(first_weights(0, "a"), first_weights(0, "bb"))  # no update ran: initial weights
+    assert not torch.equal(first_weights(0, "c"), first_weights(1, "d"))

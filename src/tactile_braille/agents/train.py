@@ -243,6 +243,7 @@ def train(
     config, run_dir = _open_run(config, run_dir, resume)
     torch.set_num_threads(config.threads)
     env, test_env = make_env(config), make_env(config)
+    torch.manual_seed(config.seed)  # before the networks are made: the seed fixes their initial weights
     agent = make_agent(config, env)
     action_shape = env.action_space.shape if AGENTS[config.algo].continuous else ()  # checked by make_agent
     buffer = EpisodeReplayBuffer(
@@ -254,7 +255,6 @@ def train(
         max_episode_steps=max(getattr(env.spec, "max_episode_steps", None) or 0, 100),
     )
     rng = np.random.default_rng(config.seed)
-    torch.manual_seed(config.seed)
     start_epoch, env_steps, updates = 0, 0, 0
     checkpoint = run_dir / "checkpoint.pt"
     if resume and checkpoint.exists():
