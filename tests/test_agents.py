@@ -217,6 +217,7 @@ def test_convergence_epoch_rules():
     assert convergence_epoch(curve, level=0.95) is None  # never reaches 0.95 in absolute terms
     assert convergence_epoch([0.0, 0.96, 1.0], level=0.95) == 1
     assert convergence_epoch([]) is None
+    assert convergence_epoch([0.0, 0.0, 0.0]) is None  # a run that never scored has not converged
 
 
 def test_report_evaluates_the_checkpoint_and_draws_the_curve(env_datasets, tmp_path):

@@ -769,3 +769,32 @@ def test_the_run_seed_fixes_the_initial_weights(env_datasets, tmp_path):
 
     assert torch.equal(first_weights(0, "a"), first_weights(0, "bb"))  # no update ran: initial weights
     assert not torch.equal(first_weights(0, "c"), first_weights(1, "d"))
+
+
+@pytest.mark.parametrize(
+    ("config_class", "changes", "message"),
+    [
+        (DQNConfig, {"batch_size": 0}, "batch_size"),
+        (SACConfig, {"gamma": 1.5}, "gamma"),
+        (TD3Config, {"tau": 0.0}, "tau"),
+        (DiscreteSACConfig, {"alpha_learning_rate": -1.0}, "alpha_learning_rate"),
+        (DQNConfig, {"hidden": ()}, "hidden"),
+    ],
+)
+def test_hyperparameters_are_checked(config_class, changes, message):
+    with pytest.raises(ValueError, match=message):
+        config_class(**changes)
+
+
+def test_replay_save_leaves_out_the_episode_in_progress(tmp_path):
+    buffer = EpisodeReplayBuffer(10, 4, (), 5, her=False, max_episode_steps=5)
+    buffer.start_episode(replay_observation(0))
+    buffer.add_step(0, 0.0, replay_observation(255, 0, 1), terminated=True)
+    buffer.end_episode()
+    buffer.start_episode(replay_observation(0))  # in progress: one frame written, nothing committed
+    buffer.add_step(1, 0.0, replay_observation(255), terminated=False)
+    assert buffer.frames_written == 4
+    buffer.save(tmp_path / "replay.npz")
+    restored = EpisodeReplayBuffer(10, 4, (), 5, her=False, max_episode_steps=5)
+    restored.load(tmp_path / "replay.npz")
+    assert (restored.frames_written, restored.next_frame, restored.size) == (2, 2, 1)

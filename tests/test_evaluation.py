@@ -29,12 +29,13 @@ class Oracle:
     def __init__(self, env):
         self.env = env
 
-    def policy_action(self, observation, step, explore, rng):
+    def policy_action(self, observation, step, explore, rng, deterministic=False):
+        assert deterministic  # the protocol asks for deterministic actions
         return oracle_action(self.env)
 
 
 class PressAtOnce:
-    def policy_action(self, observation, step, explore, rng):
+    def policy_action(self, observation, step, explore, rng, deterministic=False):
         return PRESS
 
 

@@ -54,8 +54,8 @@ def test_results_table_has_the_papers_shape_and_numbers():
         record("DiscreteArrows-v0", "sac_discrete", 0, [0.0, 0.2, 0.5], 0.5, 400),
     ]
     groups = group(records)
-    assert list(groups) == [("DiscreteArrows-v0", "dqn"), ("DiscreteArrows-v0", "sac_discrete"),
-                            ("DiscreteAlphabet-v0", "dqn")]  # fmt: skip
+    assert list(groups) == [("DiscreteArrows-v0", "dqn", ""), ("DiscreteArrows-v0", "sac_discrete", ""),
+                            ("DiscreteAlphabet-v0", "dqn", "")]  # fmt: skip
     table = results_table(groups).splitlines()
     assert table[0].count("|") == 12
     arrows_dqn = table[2]
@@ -63,6 +63,9 @@ def test_results_table_has_the_papers_shape_and_numbers():
     assert "1.5 [1.0, 2.0]" in arrows_dqn  # convergence epochs 1 and 2 (95 % of 1.0)
     assert arrows_dqn.endswith("| 230 | 1.000 | 8 |")  # the paper's Table III
     assert "0/1 reached" in table[3]  # discrete SAC never reached 0.95
+    assert "| 400 (one run) |" in table[3]
+    with pytest.raises(ValueError, match="repeats seed 0"):
+        group([*records, record("DiscreteArrows-v0", "dqn", 0, [0.5])])
     assert table[4].endswith("| 1722 | 0.981 | 45 |")
 
 
@@ -92,13 +95,19 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     report = write_report(runs, tmp_path / "report", title="Two seeds")
     text = report.read_text()
     assert text.startswith("# Two seeds")
-    assert "| sim | disc arrow | DQN | 2 |" in text
-    for name in ("curves.png", "confusion_DiscreteArrows__dqn.png", "trajectories_DiscreteArrows__dqn.png"):
+    assert "| sim | disc arrow | DQN (custom, fp32) | 2 |" in text
+    for name in ("curves.png", "confusion_DiscreteArrows__dqn__custom_fp32.png",
+                 "trajectories_DiscreteArrows__dqn__custom_fp32.png"):  # fmt: skip
         assert (tmp_path / "report" / name).read_bytes()[:4] == b"\x89PNG", name
         assert f"]({name})" in text
     typing = json.loads((runs[0] / "typing.json").read_text())  # evaluated on the way
     assert typing["keys_asked"] == 96 and 0.0 <= typing["accuracy"] <= 1.0
+    assert typing["checkpoint_epoch"] == 2
     assert sum(map(sum, typing["confusion"]["counts"])) == 96
     assert [r.seed for r in load_records(runs)] == [0, 1]
+    # A typing evaluation older than the run's last epoch is stale: it is done again.
+    stale = dict(typing, checkpoint_epoch=1, accuracy=-1.0)
+    (runs[0] / "typing.json").write_text(json.dumps(stale))
+    assert load_records(runs[:1])[0].typing["accuracy"] >= 0.0
     with pytest.raises(FileNotFoundError, match="not a training run"):
         load_records([tmp_path])

@@ -34,6 +34,12 @@ def test_sequential_sweep_is_resumable_and_retries(env_datasets, tmp_path, monke
     before = (runs[0] / "progress.csv").read_text()
     sweep(trials, tmp_path, use_ray=False, progress=False)  # finished trials return at once
     assert (runs[0] / "progress.csv").read_text() == before
+    other = plan(["DiscreteArrows-v0"], ["dqn"], [0], dataset=dataset, **{**TINY, "precision": "bf16"})
+    with pytest.raises(ValueError, match=r"other settings \(precision\)"):
+        sweep(other, tmp_path, use_ray=False, progress=False)
+    longer = plan(["DiscreteArrows-v0"], ["dqn"], [0], dataset=dataset, **{**TINY, "epochs": 2})
+    sweep(longer, tmp_path, use_ray=False, progress=False)  # more epochs extend the run
+    assert len(read_progress(runs[0])) == 2
 
     from tactile_braille import sweep as sweep_module
 

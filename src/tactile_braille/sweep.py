@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tactile_braille._io import atomic_path
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.train import AGENTS, train
 
@@ -72,9 +74,24 @@ def plan(
 
 
 def run_trial(trial: Trial, root: str | Path, progress: bool = False) -> Path:
-    """Train the trial in ``root/<name>``, resuming what is there."""
+    """Train the trial in ``root/<name>``, resuming what is there.
+
+    Raises:
+        ValueError: the folder holds a run with other settings (more epochs
+            are allowed: the run is extended).
+    """
     run_dir = Path(root) / trial.name
-    if (run_dir / "config.json").exists():
+    config_file = run_dir / "config.json"
+    if config_file.exists():
+        stored, wanted = json.loads(config_file.read_text()), json.loads(json.dumps(trial.config().to_json()))
+        differing = sorted(key for key in wanted if key != "epochs" and stored.get(key) != wanted[key])
+        if differing:
+            raise ValueError(f"{run_dir} holds a run with other settings ({', '.join(differing)}); "
+                             "use another --root")  # fmt: skip
+        if wanted["epochs"] > stored["epochs"]:
+            stored["epochs"] = wanted["epochs"]
+            with atomic_path(config_file) as temporary:
+                temporary.write_text(json.dumps(stored, indent=2))
         return train(run_dir=run_dir, resume=True, progress=progress)
     return train(trial.config(), run_dir=run_dir, progress=progress)
 
@@ -96,6 +113,8 @@ def sweep(
 
     ``use_ray=None`` uses Ray when it is installed.
     """
+    for trial in trials:
+        trial.config()  # bad settings fail here, before any trial starts
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     if use_ray is None:
@@ -110,6 +129,8 @@ def sweep(
                 try:
                     run_trial(trial, root, progress=progress)
                     break
+                except ValueError:  # wrong settings: a retry would fail the same way
+                    raise
                 except Exception as error:  # a retry resumes from the last checkpoint
                     if attempt == max_failures:
                         raise RuntimeError(f"trial {trial.name} failed {attempt + 1} times") from error
@@ -124,8 +145,11 @@ def _sweep_on_ray(trials, root: Path, address, cpus_per_trial: float, max_failur
     def trainable(space: dict) -> None:
         import torch
 
-        trial = Trial(**space["trial"])
-        torch.set_num_threads(max(int(cpus_per_trial), 1))
+        fields = dict(space["trial"])
+        # One torch thread per CPU the trial was given, unless the trial says otherwise.
+        fields["overrides"] = {"threads": max(int(cpus_per_trial), 1), **fields["overrides"]}
+        trial = Trial(**fields)
+        torch.set_num_threads(fields["overrides"]["threads"])
         run_dir = run_trial(trial, space["root"])
         from tactile_braille.agents.train import read_progress
 

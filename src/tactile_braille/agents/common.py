@@ -19,6 +19,25 @@ import torch
 PRECISIONS = ("fp32", "bf16")
 
 
+def check_hyperparameters(config) -> None:
+    """Refuse hyperparameters no algorithm can use (called by each config's ``__post_init__``)."""
+    problems = []
+    if getattr(config, "batch_size", 1) < 1:
+        problems.append(f"batch_size must be at least 1, got {config.batch_size}")
+    if not 0.0 <= getattr(config, "gamma", 0.0) <= 1.0:
+        problems.append(f"gamma must be in [0, 1], got {config.gamma}")
+    if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
+        problems.append(f"tau must be in (0, 1], got {config.tau}")
+    for name in ("learning_rate", "alpha_learning_rate"):
+        if getattr(config, name, 1.0) <= 0:
+            problems.append(f"{name} must be positive, got {getattr(config, name)}")
+    hidden = getattr(config, "hidden", (1,))
+    if not hidden or min(hidden) < 1:
+        problems.append(f"hidden needs at least one positive layer size, got {hidden}")
+    if problems:
+        raise ValueError(f"{type(config).__name__}: " + "; ".join(problems))
+
+
 def spaces_sizes(observation_space: gym.spaces.Dict) -> tuple[int, int]:
     """Lengths of the goal one-hot and of the previous-action vector."""
     try:

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
 from tactile_braille.agents.networks import DuelingQNetwork, observation_tensors, soft_update
 
 
@@ -44,6 +44,9 @@ class DQNConfig:
     test_epsilon: float = 0.0
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
+
+    def __post_init__(self) -> None:
+        check_hyperparameters(self)
 
 
 class DQNAgent(Agent):
@@ -93,8 +96,17 @@ class DQNAgent(Agent):
             return int(rng.integers(self.num_actions))
         return int(self.q(*observation_tensors(observation, self.device)).argmax(dim=-1).item())
 
-    def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator) -> int:
-        """Epsilon-greedy (the paper's schedule) while exploring, ``test_epsilon`` otherwise."""
+    def policy_action(
+        self,
+        observation: dict,
+        step: int,
+        explore: bool,
+        rng: np.random.Generator,
+        deterministic: bool = False,
+    ) -> int:
+        """Epsilon-greedy: the paper's schedule exploring, else ``test_epsilon``; 0 if ``deterministic``."""
+        if deterministic:
+            return self.act(observation, 0.0, rng)
         return self.act(observation, self.epsilon(step) if explore else self.config.test_epsilon, rng)
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:

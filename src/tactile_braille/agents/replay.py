@@ -69,6 +69,7 @@ class EpisodeReplayBuffer:
         self.dones = np.zeros(self.capacity, dtype=np.float32)
         self.next_frame = 0
         self.frames_written = 0
+        self._committed = (0, 0)  # (next_frame, frames_written) after the last committed episode
         self.next_slot = 0
         self.size = 0
         self._episode: list[dict] = []
@@ -126,6 +127,7 @@ class EpisodeReplayBuffer:
                     self._add(step, last["achieved"], 1.0 if i == len(self._episode) - 1 else 0.0)
         self._episode = []
         self._current_frame = -1
+        self._committed = (self.next_frame, self.frames_written)
 
     def _add(self, step: dict, goal: np.ndarray, reward: float) -> None:
         slot = self.next_slot
@@ -165,13 +167,19 @@ class EpisodeReplayBuffer:
     _ARRAYS = ("frames", "frame_index", "previous_actions", "goals", "actions", "rewards", "dones")
 
     def save(self, path: str | Path) -> None:
-        """Write the used part of the buffer (committed transitions) atomically as ``.npz``."""
-        frames = min(self.frames_written, self.frame_capacity)
+        """Write the used part of the buffer (committed transitions) atomically as ``.npz``.
+
+        The frames of an episode in progress are left out (the counters are
+        those after the last committed episode), so a resumed run has the
+        whole slack of the frame ring for its next episode.
+        """
+        next_frame, frames_written = self._committed
+        frames = min(frames_written, self.frame_capacity)
         arrays = {name: getattr(self, name)[: self.size] for name in self._ARRAYS if name != "frames"}
         with atomic_path(path, fsync=True) as temporary, open(temporary, "wb") as handle:
             np.savez(
                 handle,
-                counters=np.array([self.next_frame, self.frames_written, self.next_slot, self.size]),
+                counters=np.array([next_frame, frames_written, self.next_slot, self.size]),
                 frame_capacity=np.array(self.frame_capacity),
                 frames=self.frames[:frames],
                 **arrays,
@@ -195,5 +203,6 @@ class EpisodeReplayBuffer:
             self.next_frame, self.frames_written, self.next_slot, self.size = (
                 int(v) for v in data["counters"]
             )
+            self._committed = (self.next_frame, self.frames_written)
         self._episode = []
         self._current_frame = -1

@@ -23,9 +23,15 @@ from tactile_braille.agents.train import TrainConfig, evaluate, make_agent, make
 def convergence_epoch(
     returns: list[float], fraction: float | None = 0.95, level: float | None = None
 ) -> int | None:
-    """First epoch reaching ``fraction`` of the best return (the paper's rule) or an absolute ``level``."""
+    """First epoch reaching ``fraction`` of the best return (the paper's rule) or an absolute ``level``.
+
+    None when never reached, and, under the paper's rule, for a run that never
+    scored (its best is 0, which every epoch would "reach").
+    """
     values = np.asarray(returns, dtype=float)
     if values.size == 0 or np.all(np.isnan(values)):
+        return None
+    if level is None and np.nanmax(values) <= 0:
         return None
     threshold = level if level is not None else fraction * np.nanmax(values)
     reached = np.flatnonzero(values >= threshold)

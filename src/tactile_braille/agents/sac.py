@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     GaussianPolicy,
@@ -52,6 +52,9 @@ class SACConfig:
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
     shared_encoder: bool = False
+
+    def __post_init__(self) -> None:
+        check_hyperparameters(self)
 
 
 class SACAgent(Agent):
@@ -93,11 +96,16 @@ class SACAgent(Agent):
 
     @torch.no_grad()
     def policy_action(
-        self, observation: dict, step: int, explore: bool, rng: np.random.Generator
+        self,
+        observation: dict,
+        step: int,
+        explore: bool,
+        rng: np.random.Generator,
+        deterministic: bool = False,
     ) -> np.ndarray:
-        """A policy sample while exploring, the squashed mean otherwise."""
+        """A policy sample while exploring, the squashed mean otherwise (or if ``deterministic``)."""
         sample, _, mean = self.actor(*observation_tensors(observation, self.device))
-        return (sample if explore else mean)[0].cpu().numpy().astype(np.float32)
+        return (sample if explore and not deterministic else mean)[0].cpu().numpy().astype(np.float32)
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One update of the critics, the actor and the temperature."""

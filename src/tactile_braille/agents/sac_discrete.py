@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
 from tactile_braille.agents.networks import DuelingQNetwork, PolicyNetwork, observation_tensors, soft_update
 
 
@@ -48,6 +48,9 @@ class DiscreteSACConfig:
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
     shared_encoder: bool = False
+
+    def __post_init__(self) -> None:
+        check_hyperparameters(self)
 
 
 class DiscreteSACAgent(Agent):
@@ -91,10 +94,17 @@ class DiscreteSACAgent(Agent):
         self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=config.alpha_learning_rate)
 
     @torch.no_grad()
-    def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator) -> int:
-        """A sampled action while exploring, the most probable one otherwise."""
+    def policy_action(
+        self,
+        observation: dict,
+        step: int,
+        explore: bool,
+        rng: np.random.Generator,
+        deterministic: bool = False,
+    ) -> int:
+        """A sampled action while exploring, the most probable one otherwise (or if ``deterministic``)."""
         probabilities = self.actor(*observation_tensors(observation, self.device))[0][0].cpu().numpy()
-        if explore:
+        if explore and not deterministic:
             return int(rng.choice(self.num_actions, p=probabilities / probabilities.sum()))
         return int(probabilities.argmax())
 

@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     DeterministicPolicy,
@@ -61,6 +61,9 @@ class TD3Config:
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
     shared_encoder: bool = False
+
+    def __post_init__(self) -> None:
+        check_hyperparameters(self)
 
 
 class TD3Agent(Agent):
@@ -114,11 +117,16 @@ class TD3Agent(Agent):
 
     @torch.no_grad()
     def policy_action(
-        self, observation: dict, step: int, explore: bool, rng: np.random.Generator
+        self,
+        observation: dict,
+        step: int,
+        explore: bool,
+        rng: np.random.Generator,
+        deterministic: bool = False,
     ) -> np.ndarray:
-        """The policy's action plus Gaussian noise (the schedule's, or ``test_noise``), clipped."""
+        """The action plus Gaussian noise: the schedule's, else ``test_noise``; none if deterministic."""
         action = self.actor(*observation_tensors(observation, self.device))[0].cpu().numpy()
-        scale = self.noise(step) if explore else self.config.test_noise
+        scale = 0.0 if deterministic else self.noise(step) if explore else self.config.test_noise
         if scale > 0:
             action = action + scale * rng.standard_normal(action.shape)
         return np.clip(action, -1.0, 1.0).astype(np.float32)

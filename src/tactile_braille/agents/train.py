@@ -261,7 +261,9 @@ def train(
         state = torch.load(checkpoint, weights_only=False, map_location=agent.device)
         agent.load_state_dict(state["agent"])
         rng.bit_generator.state = state["rng"]
-        torch.set_rng_state(state["torch_rng"])
+        torch.set_rng_state(state["torch_rng"].cpu())
+        if state.get("cuda_rng") is not None and torch.cuda.is_available():
+            torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
         start_epoch, env_steps, updates = state["epoch"] + 1, state["env_steps"], state["updates"]
         buffer.load(run_dir / state["replay"])
 
@@ -360,6 +362,7 @@ def _save_checkpoint(run_dir: Path, agent, buffer, rng, epoch: int, env_steps: i
     buffer.save(run_dir / replay)
     state = {
         "agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+        "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
         "epoch": epoch, "env_steps": env_steps, "updates": updates, "replay": replay,
     }  # fmt: skip
     with atomic_path(run_dir / "checkpoint.pt", fsync=True) as temporary:

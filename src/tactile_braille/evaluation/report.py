@@ -86,6 +86,18 @@ class RunRecord:
     config: TrainConfig | None = field(default=None, repr=False)
 
     @property
+    def variant(self) -> str:
+        """The settings that set this run apart from others of its task and algorithm."""
+        if self.config is None:
+            return ""
+        parts = [self.config.preset or "custom", self.config.precision]
+        if not self.config.her:
+            parts.append("no HER")
+        if self.config.backend != "dataset":
+            parts.append(f"{self.config.backend} backend")
+        return ", ".join(parts)
+
+    @property
     def convergence(self) -> int | None:
         return convergence_epoch(list(self.returns))
 
@@ -105,10 +117,11 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
         config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
         rows = read_progress(run_dir)
         typing_file = run_dir / "typing.json"
-        typing = None
-        if typing_file.exists():
-            typing = json.loads(typing_file.read_text())
-        elif evaluate_missing and (run_dir / "checkpoint.pt").exists():
+        typing = json.loads(typing_file.read_text()) if typing_file.exists() else None
+        last_epoch = int(rows[-1]["epoch"]) if rows else -1
+        if typing is not None and typing.get("checkpoint_epoch") != last_epoch:
+            typing = None  # evaluated before the run went on: stale
+        if typing is None and evaluate_missing and (run_dir / "checkpoint.pt").exists():
             typing = evaluate_typing(run_dir)
         records.append(RunRecord(
             path=run_dir, task=config.task.split("/")[-1], algo=config.algo, seed=config.seed,
@@ -117,14 +130,17 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
     return records
 
 
-def group(records: list[RunRecord]) -> dict[tuple[str, str], list[RunRecord]]:
-    """Records by (task, algo), in the paper's order."""
+def group(records: list[RunRecord]) -> dict[tuple[str, str, str], list[RunRecord]]:
+    """Records by (task, algo, variant), in the paper's order; runs of one group need distinct seeds."""
     order = list(TASK_NAMES)
-    groups: dict[tuple[str, str], list[RunRecord]] = {}
+    groups: dict[tuple[str, str, str], list[RunRecord]] = {}
     for record in sorted(
-        records, key=lambda r: (order.index(r.task) if r.task in order else 99, r.algo, r.seed)
+        records, key=lambda r: (order.index(r.task) if r.task in order else 99, r.algo, r.variant, r.seed)
     ):
-        groups.setdefault((record.task, record.algo), []).append(record)
+        members = groups.setdefault((record.task, record.algo, record.variant), [])
+        if any(other.seed == record.seed for other in members):
+            raise ValueError(f"{record.path} repeats seed {record.seed} of {members[0].path}")
+        members.append(record)
     return groups
 
 
@@ -144,19 +160,25 @@ def _stat(values, digits: int = 1) -> str:
     values = [v for v in values if v is not None and np.isfinite(v)]
     if not values:
         return "-"
+    if len(values) == 1:
+        return f"{values[0]:.{digits}f} (one run)"
     low, high = bootstrap_ci(values)
     text = f"{np.mean(values):.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
     return text + (f"; IQM {iqm(values):.{digits}f}" if len(values) >= 4 else "")
 
 
-def results_table(groups: dict[tuple[str, str], list[RunRecord]]) -> str:
+def _label(algo: str, variant: str) -> str:
+    return ALGO_NAMES.get(algo, algo) + (f" ({variant})" if variant else "")
+
+
+def results_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     """Markdown in the shape of the paper's Table III, ours (mean [95 % CI]) beside the paper's."""
     lines = [
         "| env | task | algo | seeds | steps | accuracy | convergence epoch | first epoch >= 0.95 "
         "| paper: steps | paper: accuracy | paper: convergence |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for (task, algo), records in groups.items():
+    for (task, algo, variant), records in groups.items():
         typed = [r.typing for r in records if r.typing]
         steps = _stat([t["total_steps"] for t in typed], 0)
         accuracy = _stat([t["accuracy"] for t in typed], 3)
@@ -169,14 +191,14 @@ def results_table(groups: dict[tuple[str, str], list[RunRecord]]) -> str:
         paper = PAPER_TABLE.get(("sim", task, algo))
         paper_cells = [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
         lines.append(
-            f"| sim | {TASK_NAMES.get(task, task)} | {ALGO_NAMES.get(algo, algo)} | {len(records)} | {steps} "
+            f"| sim | {TASK_NAMES.get(task, task)} | {_label(algo, variant)} | {len(records)} | {steps} "
             f"| {accuracy} | {convergence} | {reached_text} | " + " | ".join(paper_cells) + " |"
         )
     return "\n".join(lines)
 
 
 # ------------------------------------------------------------------ figures
-def plot_curves(groups: dict[tuple[str, str], list[RunRecord]], path: str | Path) -> Path:
+def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str | Path) -> Path:
     """Test return per epoch for each group: seeds, their mean and range, convergence, the original run."""
     import matplotlib
 
@@ -190,7 +212,7 @@ def plot_curves(groups: dict[tuple[str, str], list[RunRecord]], path: str | Path
     columns = min(count, 2)
     rows = int(np.ceil(count / columns))
     fig, axes = plt.subplots(rows, columns, figsize=(6.2 * columns, 3.6 * rows), squeeze=False)
-    for ax, ((task, algo), records) in zip(axes.ravel(), groups.items(), strict=False):
+    for ax, ((task, algo, variant), records) in zip(axes.ravel(), groups.items(), strict=False):
         length = min(len(r.returns) for r in records)
         curves = np.stack([r.returns[:length] for r in records])
         epochs = np.arange(length)
@@ -208,7 +230,7 @@ def plot_curves(groups: dict[tuple[str, str], list[RunRecord]], path: str | Path
             ax.plot(original[0][shown], original[1][shown], color="black", lw=1, ls=":",
                     label="original release (sim, seed 1)")  # fmt: skip
         paper = PAPER_TABLE.get(("sim", task, algo))
-        title = f"{task}, {ALGO_NAMES.get(algo, algo)}"
+        title = f"{task}, {_label(algo, variant)}"
         ax.set_title(title + (f" (paper: converged at epoch {paper[2]})" if paper else ""), fontsize=9)
         ax.set_xlabel("epoch (250 steps)")
         ax.set_ylabel("test return")
@@ -258,7 +280,7 @@ def plot_trajectories(record: RunRecord, path: str | Path, goals: int = 3, seed:
             observation, _ = env.reset(seed=seed + row, options={"goal_key": goal})
             done, steps, info = False, 0, {}
             while not done:
-                action = agent.policy_action(observation, 0, explore=False, rng=rng)
+                action = agent.policy_action(observation, 0, explore=False, rng=rng, deterministic=True)
                 observation, _, terminated, truncated, info = env.step(action)
                 done, steps = terminated or truncated, steps + 1
             ax = axes[row, column]
@@ -290,9 +312,11 @@ def write_report(run_dirs, output: str | Path, title: str = "Results") -> Path:
         "the run's best test return) and, stricter, the first epoch whose test return reaches 0.95.",
         "", results_table(groups), "", "![training curves](curves.png)", "",
     ]  # fmt: skip
-    for (task, algo), records in groups.items():
-        name = f"{task.split('-')[0]}__{algo}"
-        lines += [f"## {task}, {ALGO_NAMES.get(algo, algo)}", ""]
+    for (task, algo, variant), records in groups.items():
+        name = f"{task.split('-')[0]}__{algo}" + (
+            f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""
+        )
+        lines += [f"## {task}, {_label(algo, variant)}", ""]
         lines += [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs, convergence {r.convergence}, "
                   f"typing accuracy {r.typing['accuracy']:.3f} in {r.typing['total_steps']} steps"
                   if r.typing else f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs (no checkpoint)"
@@ -302,7 +326,7 @@ def write_report(run_dirs, output: str | Path, title: str = "Results") -> Path:
             confusion = np.sum([r.typing["confusion"]["counts"] for r in typed], axis=0)
             first = typed[0].typing["confusion"]
             merged = _ConfusionOnly(tuple(first["rows"]), tuple(first["columns"]), confusion)
-            caption = f"{task}, {ALGO_NAMES.get(algo, algo)}: typing over {len(typed)} seeds"
+            caption = f"{task}, {_label(algo, variant)}: typing over {len(typed)} seeds"
             save_typing_confusion(merged, output / f"confusion_{name}.png", caption)
             lines += ["", f"![typing confusion](confusion_{name}.png)"]
         if plot_trajectories(records[0], output / f"trajectories_{name}.png") is not None:
