@@ -46,7 +46,8 @@ def main() -> None:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    print(f"wrote {len(rows)} epochs of {len({(r['platform'], r['task'], r['algo']) for r in rows})} runs to {OUTPUT}")
+    runs = len({(r["platform"], r["task"], r["algo"]) for r in rows})
+    print(f"wrote {len(rows)} epochs of {runs} runs to {OUTPUT}")
 
 
 if __name__ == "__main__":

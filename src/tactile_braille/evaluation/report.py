@@ -329,7 +329,8 @@ def write_report(run_dirs, output: str | Path, title: str = "Results") -> Path:
             caption = f"{task}, {_label(algo, variant)}: typing over {len(typed)} seeds"
             save_typing_confusion(merged, output / f"confusion_{name}.png", caption)
             lines += ["", f"![typing confusion](confusion_{name}.png)"]
-        if plot_trajectories(records[0], output / f"trajectories_{name}.png") is not None:
+        with_snapshots = [r for r in records if (r.path / "snapshots").is_dir()]
+        if with_snapshots and plot_trajectories(with_snapshots[0], output / f"trajectories_{name}.png"):
             lines += ["", f"![trajectories](trajectories_{name}.png)"]
         lines.append("")
     report = output / "results.md"
