@@ -49,8 +49,8 @@ def spaces_sizes(observation_space: gym.spaces.Dict) -> tuple[int, int]:
         ) from error
 
 
-def adam(parameters, learning_rate: float, device: torch.device) -> torch.optim.Adam:
-    """Adam, fused when the device supports it (CPU and CUDA do in PyTorch >= 2.4)."""
+def adam(parameters, learning_rate: float) -> torch.optim.Adam:
+    """Adam, fused when the parameters' device supports it (CPU and CUDA do in PyTorch >= 2.4)."""
     parameters = list(parameters)
     try:
         return torch.optim.Adam(parameters, lr=learning_rate, fused=True)

@@ -81,7 +81,7 @@ class DQNAgent(Agent):
             self.device
         )
         self.target = copy.deepcopy(self.q).requires_grad_(False)
-        self.optimiser = adam(self.q.parameters(), self.config.learning_rate, self.device)
+        self.optimiser = adam(self.q.parameters(), self.config.learning_rate)
 
     def epsilon(self, step: int) -> float:
         """Exploration rate after ``step`` environment steps."""

@@ -90,8 +90,8 @@ class SACAgent(Agent):
         self.actor = GaussianPolicy(*sizes, encoder=shared).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
         self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
-        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, self.device)
-        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, self.device)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate)
         self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=config.alpha_learning_rate)
 
     @torch.no_grad()

@@ -89,8 +89,8 @@ class DiscreteSACAgent(Agent):
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
         self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
         self.target_entropy = config.target_entropy_ratio * math.log(self.num_actions)
-        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, self.device)
-        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, self.device)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate)
         self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=config.alpha_learning_rate)
 
     @torch.no_grad()

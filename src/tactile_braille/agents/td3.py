@@ -105,8 +105,8 @@ class TD3Agent(Agent):
         self.actor_target = DeterministicPolicy(*sizes, encoder=target_shared).to(self.device)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.actor_target.requires_grad_(False)
-        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, self.device)
-        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, self.device)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate)
         self.critic_updates = torch.zeros((), dtype=torch.int64)
 
     def noise(self, step: int) -> float:

@@ -169,7 +169,7 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
              "steps": int(sum(steps))}
             for text, keys_typed, steps in zip(SENTENCES, typed.typed, typed.steps, strict=True)
         ]  # fmt: skip
-    save_typing_confusion(result, run_dir / "typing_confusion.png",
+    save_typing_confusion(result.confusion(), result.keys, result.columns, run_dir / "typing_confusion.png",
                           f"{config.task.split('/')[-1]}, {config.algo}: accuracy {result.accuracy:.3f}, "
                           f"{result.total_steps} steps")  # fmt: skip
     with atomic_path(run_dir / "typing.json") as temporary:
@@ -182,7 +182,7 @@ def _as_text(keys: list[str]) -> str:
     return "".join(" " if k == "SPACE" else k if len(k) == 1 else "_" for k in keys)
 
 
-def save_typing_confusion(result: TypingResult, path, title: str):
+def save_typing_confusion(matrix: np.ndarray, keys, columns, path, title: str):
     """The typing confusion matrix as a PNG (rows: goal key; columns: key pressed, OTHER, NONE)."""
     import matplotlib
 
@@ -191,12 +191,11 @@ def save_typing_confusion(result: TypingResult, path, title: str):
 
     from tactile_braille.gallery import save_figure
 
-    matrix = result.confusion()
-    size = 2.5 + 0.28 * len(result.columns)
+    size = 2.5 + 0.28 * len(columns)
     fig, ax = plt.subplots(figsize=(size, size * 0.9))
     ax.imshow(np.where(matrix > 0, matrix, np.nan), cmap="viridis", interpolation="nearest")
-    ax.set_xticks(range(len(result.columns)), result.columns, rotation=90, fontsize=7)
-    ax.set_yticks(range(len(result.keys)), result.keys, fontsize=7)
+    ax.set_xticks(range(len(columns)), columns, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(keys)), keys, fontsize=7)
     ax.set_xlabel("key pressed")
     ax.set_ylabel("goal key")
     for i, j in zip(*np.nonzero(matrix), strict=True):

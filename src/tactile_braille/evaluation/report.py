@@ -325,9 +325,9 @@ def write_report(run_dirs, output: str | Path, title: str = "Results") -> Path:
         if typed:
             confusion = np.sum([r.typing["confusion"]["counts"] for r in typed], axis=0)
             first = typed[0].typing["confusion"]
-            merged = _ConfusionOnly(tuple(first["rows"]), tuple(first["columns"]), confusion)
             caption = f"{task}, {_label(algo, variant)}: typing over {len(typed)} seeds"
-            save_typing_confusion(merged, output / f"confusion_{name}.png", caption)
+            path = output / f"confusion_{name}.png"
+            save_typing_confusion(confusion, first["rows"], first["columns"], path, caption)
             lines += ["", f"![typing confusion](confusion_{name}.png)"]
         with_snapshots = [r for r in records if (r.path / "snapshots").is_dir()]
         if with_snapshots and plot_trajectories(with_snapshots[0], output / f"trajectories_{name}.png"):
@@ -337,15 +337,3 @@ def write_report(run_dirs, output: str | Path, title: str = "Results") -> Path:
     with atomic_path(report) as temporary:
         temporary.write_text("\n".join(lines))
     return report
-
-
-@dataclass
-class _ConfusionOnly:
-    """Enough of a TypingResult to draw a summed confusion matrix."""
-
-    keys: tuple[str, ...]
-    columns: tuple[str, ...]
-    matrix: np.ndarray
-
-    def confusion(self) -> np.ndarray:
-        return self.matrix
