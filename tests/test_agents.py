@@ -212,10 +212,11 @@ def test_convergence_epoch_rules():
     from tactile_braille.agents.report import convergence_epoch
 
     curve = [0.1, 0.5, 0.8, 0.78, 0.9, 0.85]
-    assert convergence_epoch(curve) == 4  # 95 % of the best (0.9) is 0.855: first reached at epoch 4
-    assert convergence_epoch(curve, fraction=0.85) == 2  # 0.765
+    # Epochs count from 1, as in the paper's logs: curve[i] is the test after epoch i + 1.
+    assert convergence_epoch(curve) == 5  # 95 % of the best (0.9) is 0.855: first reached by curve[4]
+    assert convergence_epoch(curve, fraction=0.85) == 3  # 0.765
     assert convergence_epoch(curve, level=0.95) is None  # never reaches 0.95 in absolute terms
-    assert convergence_epoch([0.0, 0.96, 1.0], level=0.95) == 1
+    assert convergence_epoch([0.0, 0.96, 1.0], level=0.95) == 2
     assert convergence_epoch([]) is None
     assert convergence_epoch([0.0, 0.0, 0.0]) is None  # a run that never scored has not converged
 

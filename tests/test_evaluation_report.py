@@ -60,7 +60,7 @@ def test_results_table_has_the_papers_shape_and_numbers():
     assert table[0].count("|") == 12
     arrows_dqn = table[2]
     assert "| disc arrow | DQN | 2 | 245 [240, 250] | 1.000 [1.000, 1.000] |" in arrows_dqn
-    assert "1.5 [1.0, 2.0]" in arrows_dqn  # convergence epochs 1 and 2 (95 % of 1.0)
+    assert "2.5 [2.0, 3.0]" in arrows_dqn  # convergence epochs 2 and 3 (95 % of 1.0; counted from 1)
     assert arrows_dqn.endswith("| 230 | 1.000 | 8 |")  # the paper's Table III
     assert "0/1 reached" in table[3]  # discrete SAC never reached 0.95
     assert "| 400 (one run) |" in table[3]

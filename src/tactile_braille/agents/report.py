@@ -25,8 +25,11 @@ def convergence_epoch(
 ) -> int | None:
     """First epoch reaching ``fraction`` of the best return (the paper's rule) or an absolute ``level``.
 
-    None when never reached, and, under the paper's rule, for a run that never
-    scored (its best is 0, which every epoch would "reach").
+    ``returns[i]`` is the test after epoch ``i + 1``, and epochs count from 1
+    as the original release's logs count them (epoch 1 ends after the first
+    250 steps), so the figure compares with the paper's Table III. None when
+    never reached, and, under the paper's rule, for a run that never scored
+    (its best is 0, which every epoch would "reach").
     """
     values = np.asarray(returns, dtype=float)
     if values.size == 0 or np.all(np.isnan(values)):
@@ -35,7 +38,7 @@ def convergence_epoch(
         return None
     threshold = level if level is not None else fraction * np.nanmax(values)
     reached = np.flatnonzero(values >= threshold)
-    return int(reached[0]) if reached.size else None
+    return int(reached[0]) + 1 if reached.size else None
 
 
 def load_run(run_dir: str | Path):
@@ -78,7 +81,7 @@ def write_report(run_dir: str | Path, episodes: int = 100) -> Path:
     final = evaluate_run(run_dir, episodes)
 
     fig, ax = plt.subplots(figsize=(6, 3.4))
-    epochs = [int(row["epoch"]) for row in rows]
+    epochs = [int(row["epoch"]) + 1 for row in rows]  # counted from 1, as the paper does
     ax.plot(epochs, returns, marker="o", markersize=3, label="test return (each epoch)")
     train_returns = [row["train/episodic_return"] for row in rows]
     ax.plot(epochs, train_returns, alpha=0.5, label="training return")

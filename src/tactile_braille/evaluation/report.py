@@ -215,9 +215,9 @@ def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str |
     for ax, ((task, algo, variant), records) in zip(axes.ravel(), groups.items(), strict=False):
         length = min(len(r.returns) for r in records)
         curves = np.stack([r.returns[:length] for r in records])
-        epochs = np.arange(length)
+        epochs = np.arange(1, length + 1)  # epoch 1 ends after the first 250 steps, as in the paper
         for record in records:
-            ax.plot(np.arange(len(record.returns)), record.returns, lw=0.7, alpha=0.45)
+            ax.plot(np.arange(1, len(record.returns) + 1), record.returns, lw=0.7, alpha=0.45)
         ax.fill_between(epochs, curves.min(0), curves.max(0), alpha=0.2, label="seed range")
         ax.plot(epochs, curves.mean(0), lw=2, color="C0", label=f"mean of {len(records)} seeds")
         convergence = [r.convergence for r in records if r.convergence is not None]
@@ -227,7 +227,7 @@ def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str |
         original = originals.get(("sim", task, algo))
         if original is not None:
             shown = original[0] < max(length * 1.5, 10)
-            ax.plot(original[0][shown], original[1][shown], color="black", lw=1, ls=":",
+            ax.plot(original[0][shown] + 1, original[1][shown], color="black", lw=1, ls=":",
                     label="original release (sim, seed 1)")  # fmt: skip
         paper = PAPER_TABLE.get(("sim", task, algo))
         title = f"{task}, {_label(algo, variant)}"
@@ -275,7 +275,7 @@ def plot_trajectories(record: RunRecord, path: str | Path, goals: int = 3, seed:
     fig, axes = plt.subplots(goals, len(chosen), figsize=(3.4 * len(chosen), 2.9 * goals), squeeze=False)
     for column, snapshot in enumerate(chosen):
         agent.load_policy_state_dict(torch.load(snapshot, weights_only=False, map_location=agent.device))
-        epoch = int(snapshot.stem.split("_")[1])
+        epoch = int(snapshot.stem.split("_")[1]) + 1  # files count from 0, figures from 1
         for row, goal in enumerate(episode_goals):
             observation, _ = env.reset(seed=seed + row, options={"goal_key": goal})
             done, steps, info = False, 0, {}
