@@ -682,12 +682,12 @@ def test_cli_train_uses_the_released_preset_and_the_options(env_datasets, tmp_pa
     built = []
     real_train = train_module.train
 
-    def short_train(config=None, run_dir=None, resume=False, progress=True):
+    def short_train(config=None, run_dir=None, resume=False, progress=True, rig=None):
         built.append(config)
         config = config.with_changes(
             steps_per_epoch=20, start_steps=10, dataset=str(env_datasets[CONTINUOUS_TASK])
         )
-        return real_train(config, run_dir=run_dir, resume=resume, progress=progress)
+        return real_train(config, run_dir=run_dir, resume=resume, progress=progress, rig=rig)
 
     monkeypatch.setattr(train_module, "train", short_train)
     run = tmp_path / "cli"

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_braille.rigs.base import RigError
 from tactile_braille.sensor.config import PRESETS
 
 
@@ -43,7 +44,151 @@ def _make_rig(args: argparse.Namespace):
         from tactile_braille.rigs.virtual import VirtualRig
 
         return VirtualRig(sensor=args.sensor)
-    raise SystemExit(f"unknown rig {args.rig!r}")  # argparse's choices make this unreachable
+    rig, _ = _open_ur5(args.rig_config, simulated=args.rig == "simulated-ur5")
+    return rig
+
+
+def _open_ur5(config_path: Path | None, simulated: bool, dry_run: bool = False):
+    """The UR5 rig of ``config_path`` (and ``None``), or a simulated one (and its world)."""
+    import dataclasses
+
+    from tactile_braille.rigs.ur5 import UR5Config, UR5Rig
+
+    if simulated:
+        from tactile_braille.rigs.fakes import SimulatedUR5, simulated_config
+
+        config = UR5Config.load(config_path) if config_path is not None else simulated_config()
+        config = dataclasses.replace(config, dry_run=dry_run or config.dry_run)
+        world = SimulatedUR5(config)
+        return UR5Rig(config, drivers=world.drivers()), world
+    if config_path is None:
+        raise ValueError("the UR5 rig needs its settings: --rig-config rig.json (see docs/hardware.md)")
+    config = UR5Config.load(config_path)
+    return UR5Rig(dataclasses.replace(config, dry_run=dry_run or config.dry_run)), None
+
+
+def _print_commands(commands) -> None:
+    for name, command_args in commands:
+        shown = ", ".join(
+            "[" + ", ".join(f"{v:.5f}" for v in a) + "]" if isinstance(a, list) else f"{a}"
+            for a in command_args
+        )
+        print(f"  {name}({shown})")
+
+
+def _rig_check(args: argparse.Namespace) -> int:
+    from tactile_braille.sensor.processing import process_frame
+
+    simulated = args.simulated or args.config is None
+    rig, world = _open_ur5(args.config, simulated=simulated, dry_run=args.dry_run)
+    mode = ("simulated hardware" if simulated else str(args.config)) + (
+        ", dry run" if rig.config.dry_run else ""
+    )
+    print(f"UR5 rig check ({mode}): taps at depth {args.depth} mm on {args.keys}")
+    with rig:
+        for key in args.keys.split(","):
+            x, y = rig.layout.centre_mm(key.strip())
+            sample = rig.tap(x, y, args.depth)
+            white = float((process_frame(sample.frame, rig.processing) > 0).mean())
+            print(f"{key:>6}: pressed {sample.pressed_key or 'nothing'}, "
+                  f"{rig.stats['last_tap_time_s']:.3f} s, observation {white:.1%} white")  # fmt: skip
+        sent = list(rig.arm.sent)
+    print(f"arm commands ({'logged, not sent' if rig.config.dry_run else 'sent'}; m, rad, m/s, m/s^2):")
+    _print_commands(sent)
+    if world is not None and not rig.config.dry_run:
+        print(f"simulated keyboard registered: {world.pressed_log}")
+    return 0
+
+
+def _rig_calibrate(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from tactile_braille.rigs.calibration import ask_operator, fit_work_frame, record_reference_poses
+    from tactile_braille.rigs.hardware import URArm, real_drivers
+    from tactile_braille.rigs.transforms import tcp_offset_to_ur
+    from tactile_braille.rigs.ur5 import UR5Config
+
+    keys = [k.strip() for k in args.keys.split(",")]
+    if args.simulated:
+        from tactile_braille.rigs.fakes import SimulatedUR5, simulated_config
+
+        config = UR5Config.load(args.config) if args.config is not None else simulated_config()
+        world = SimulatedUR5(config)
+        drivers, wait = world.drivers(), world.jog_to_key_top  # a simulated operator
+    else:
+        if args.config is None:
+            raise ValueError("calibrate needs the rig's settings: --config rig.json")
+        config, drivers, wait = UR5Config.load(args.config), real_drivers(), ask_operator
+    # Read only: no control script is started, the operator jogs from the pendant.
+    arm = URArm(drivers, config.host, tcp_offset_to_ur(config.tcp_offset_mm_deg), dry_run=True)
+    try:
+        poses = record_reference_poses(arm.tool_pose, keys, wait)
+    finally:
+        arm.close()
+    fit = fit_work_frame(poses, config.clearance_mm)
+    print("work_frame_mm_deg:", "[" + ", ".join(f"{v:.3f}" for v in fit.work_frame_mm_deg) + "]")
+    for key, residual in fit.residuals_mm.items():
+        print(f"  {key:>6}: residual {residual:.2f} mm")
+    print(f"rms {fit.rms_mm:.2f} mm; key-top heights spread {fit.height_spread_mm:.2f} mm")
+    if args.write:
+        if args.config is None:
+            raise ValueError("--write needs --config (the file to update)")
+        dataclasses.replace(config, work_frame_mm_deg=fit.work_frame_mm_deg).save(args.config)
+        print(f"wrote {args.config}")
+    return 0
+
+
+def _rig_crop(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from tactile_braille.rigs.calibration import propose_crop_box, save_threshold_preview
+    from tactile_braille.rigs.hardware import TacTipCamera, real_drivers
+    from tactile_braille.rigs.ur5 import UR5Config
+    from tactile_braille.sensor.config import sensor_preset
+
+    if args.simulated:
+        from tactile_braille.rigs.fakes import SimulatedUR5, simulated_config
+
+        config = UR5Config.load(args.config) if args.config is not None else simulated_config()
+        drivers = SimulatedUR5(config).drivers()
+    else:
+        if args.config is None:
+            raise ValueError("crop needs the rig's settings: --config rig.json")
+        config, drivers = UR5Config.load(args.config), real_drivers()
+    camera = TacTipCamera(drivers, config.camera_index, config.camera_size_px, config.camera_exposure)
+    try:
+        frame = camera.read()
+    finally:
+        camera.close()
+    if frame is None:
+        raise RigError("the camera returned no frame")
+    crop = propose_crop_box(frame)
+    processing = dataclasses.replace(sensor_preset(config.sensor).processing, crop_px=crop)
+    path = save_threshold_preview(frame, processing, args.output)
+    print(f"proposed crop_px: {list(crop)}; wrote {path} (check the observation's pins are clean dots)")
+    if args.write:
+        if args.config is None:
+            raise ValueError("--write needs --config (the file to update)")
+        dataclasses.replace(config, crop_px=crop).save(args.config)
+        print(f"wrote {args.config}")
+    return 0
+
+
+def _keycaps(args: argparse.Namespace) -> int:
+    from tactile_braille.keyboard.keycaps import KeycapGeometry, write_keycaps
+    from tactile_braille.keyboard.layout import ALL_TASK_KEYS, KeyboardLayout
+
+    layout = KeyboardLayout()
+    keys = ALL_TASK_KEYS if args.keys is None else tuple(k.strip().upper() for k in args.keys.split(","))
+    unknown = [k for k in keys if k not in layout]
+    if unknown:
+        raise ValueError(f"unknown keys {unknown}; e.g. A, SPACE, UP (the layout's names)")
+    start = time.perf_counter()
+    paths = write_keycaps(args.out, keys, KeycapGeometry(resolution_mm=args.resolution_mm), layout)
+    size_mb = sum(p.stat().st_size for p in paths) / 1e6
+    print(f"wrote {len(paths) - 1} STL keycaps and {paths[-1].name} to {args.out} "
+          f"({size_mb:.1f} MB, {time.perf_counter() - start:.1f} s)")  # fmt: skip
+    return 0
 
 
 def _collect(args: argparse.Namespace) -> int:
@@ -140,11 +285,25 @@ def _classify(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
+
+    rig = None
+    if args.rig_config is not None or args.simulated_rig:
+        rig, _ = _open_ur5(args.rig_config, simulated=args.simulated_rig)
+    try:
+        run = _train_with(args, rig)
+    finally:
+        if rig is not None:
+            rig.close()
+    print(f"run folder: {run}")
+    return 0
+
+
+def _train_with(args: argparse.Namespace, rig) -> Path:
     from tactile_braille.agents.presets import preset_config
     from tactile_braille.agents.train import train
 
     if args.resume is not None:
-        run = train(run_dir=args.resume, resume=True, progress=not args.quiet)
+        run = train(run_dir=args.resume, resume=True, progress=not args.quiet, rig=rig)
     else:
         if args.task is None:
             raise ValueError("give a TASK (an environment id) or --resume RUN_DIR")
@@ -161,9 +320,8 @@ def _train(args: argparse.Namespace) -> int:
         if args.shared_encoder and args.algo == "dqn":
             raise ValueError("--shared-encoder is for actor-critic agents (sac_discrete, sac, td3)")
         config = preset_config(args.preset, task, args.algo, agent=agent, **overrides)
-        run = train(config, run_dir=args.run_dir, progress=not args.quiet)
-    print(f"run folder: {run}")
-    return 0
+        run = train(config, run_dir=args.run_dir, progress=not args.quiet, rig=rig)
+    return run
 
 
 def _report(args: argparse.Namespace) -> int:
@@ -265,7 +423,11 @@ def build_parser() -> argparse.ArgumentParser:
     collect = commands.add_parser("collect", help="run a collection procedure on a rig into a dataset")
     collect.add_argument("--procedure", choices=("perturbed", "grid"), default="perturbed")
     collect.add_argument("--keys", choices=("arrows", "alphabet", "all"), default="all")
-    collect.add_argument("--rig", choices=("virtual",), default="virtual")
+    collect.add_argument(
+        "--rig", choices=("virtual", "ur5", "simulated-ur5"), default="virtual",
+        help="ur5: the real robot (--rig-config); simulated-ur5: the UR5 code path on simulated hardware",
+    )  # fmt: skip
+    collect.add_argument("--rig-config", type=Path, default=None, help="the UR5 rig's settings (JSON)")
     collect.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
     collect.add_argument("--output", type=Path, required=True, help="dataset file (.h5) to write")
     collect.add_argument("--seed", type=int, default=0)
@@ -310,7 +472,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     trainer.add_argument("--seed", type=int, default=None, help="default 0")
     trainer.add_argument("--epochs", type=int, default=None, help="default: the preset's")
-    trainer.add_argument("--backend", choices=("dataset", "render"), default=None)
+    trainer.add_argument("--backend", choices=("dataset", "render", "rig"), default=None)
+    trainer.add_argument("--rig-config", type=Path, default=None, help="backend rig: the UR5 rig's settings")
+    trainer.add_argument(
+        "--simulated-rig", action="store_true", help="backend rig: the UR5 code path on simulated hardware"
+    )
     trainer.add_argument("--device", default=None, help="cpu (default) or cuda")
     trainer.add_argument(
         "--precision",
@@ -374,6 +540,44 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
     data.add_argument("--seed", type=int, default=0)
     data.set_defaults(handler=_data)
+
+    keycaps = commands.add_parser(
+        "keycaps", help="write 3D-printable braille keycaps (STL) and a preview PNG"
+    )
+    keycaps.add_argument(
+        "--out", type=Path, required=True, help="folder for keycap_<KEY>.stl and the preview"
+    )
+    keycaps.add_argument("--keys", default=None, help="comma-separated keys (default: the 31 task keys)")
+    keycaps.add_argument("--resolution-mm", type=float, default=0.25, help="grid step of the top surface")
+    keycaps.set_defaults(handler=_keycaps)
+
+    rig = commands.add_parser("rig", help="set up and check the UR5 rig (docs/hardware.md)")
+    rig_commands = rig.add_subparsers(dest="rig_command", required=True)
+    check = rig_commands.add_parser("check", help="a few taps; prints the arm's commands")
+    check.add_argument("--config", type=Path, default=None, help="rig settings (JSON); none: simulated rig")
+    check.add_argument("--simulated", action="store_true", help="simulated hardware (with --config's frames)")
+    check.add_argument(
+        "--dry-run", action="store_true", help="log the arm's commands instead of sending them"
+    )
+    check.add_argument("--keys", default="A,F,J,SPACE", help="comma-separated keys to tap")
+    check.add_argument("--depth", type=float, default=5.0, help="tap depth in mm (8 presses the keys)")
+    check.set_defaults(handler=_rig_check)
+    calibrate = rig_commands.add_parser(
+        "calibrate", help="fit the work frame to tool poses on reference keys"
+    )
+    calibrate.add_argument("--config", type=Path, default=None, help="rig settings (JSON)")
+    calibrate.add_argument("--simulated", action="store_true", help="simulated hardware and operator")
+    calibrate.add_argument("--keys", default="Q,P,Z,RIGHT", help="reference keys, far apart")
+    calibrate.add_argument("--write", action="store_true", help="store the fitted frame in --config")
+    calibrate.set_defaults(handler=_rig_calibrate)
+    crop = rig_commands.add_parser("crop", help="propose the sensor's crop box; write a threshold preview")
+    crop.add_argument("--config", type=Path, default=None, help="rig settings (JSON)")
+    crop.add_argument("--simulated", action="store_true", help="simulated camera")
+    crop.add_argument(
+        "--output", type=Path, default=Path("outputs/threshold_preview.png"), help="preview PNG"
+    )
+    crop.add_argument("--write", action="store_true", help="store the crop box in --config")
+    crop.set_defaults(handler=_rig_crop)
     return parser
 
 
@@ -382,7 +586,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.handler(args)
-    except (FileExistsError, FileNotFoundError, ValueError) as error:
+    except (FileExistsError, FileNotFoundError, ValueError, RigError) as error:
         # DatasetError is a ValueError: bad input gets its message, not a traceback.
         print(f"tactile-braille: error: {error}", file=sys.stderr)
         return 2

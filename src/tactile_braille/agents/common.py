@@ -49,6 +49,18 @@ def spaces_sizes(observation_space: gym.spaces.Dict) -> tuple[int, int]:
         ) from error
 
 
+def observation_features(observation_space: gym.spaces.Dict) -> int | None:
+    """Length of a feature-vector observation, or None for the tactile image (networks add the encoder)."""
+    shape = observation_space["observation"].shape
+    return int(shape[0]) if len(shape) == 1 else None
+
+
+def network_options(observation_space: gym.spaces.Dict, config) -> tuple[dict, dict]:
+    """Keyword options of the actor's and the critics' networks: features, and LayerNorm in critics."""
+    actor = {"features": observation_features(observation_space)}
+    return actor, {**actor, "layer_norm": bool(getattr(config, "layer_norm", False))}
+
+
 def adam(parameters, learning_rate: float) -> torch.optim.Adam:
     """Adam, fused when the parameters' device supports it (CPU and CUDA do in PyTorch >= 2.4)."""
     parameters = list(parameters)

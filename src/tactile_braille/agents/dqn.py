@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
 from tactile_braille.agents.networks import DuelingQNetwork, observation_tensors, soft_update
 
 
@@ -33,6 +33,7 @@ class DQNConfig:
             the released code: 0.05).
         batch_size: transitions per update.
         hidden: units of the dense layers after the encoder.
+        layer_norm: LayerNorm in the Q-network's dense layers (as DroQ's critics).
     """
 
     gamma: float = 0.95
@@ -44,6 +45,7 @@ class DQNConfig:
     test_epsilon: float = 0.0
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
 
     def __post_init__(self) -> None:
         check_hyperparameters(self)
@@ -77,9 +79,10 @@ class DQNAgent(Agent):
         self.config = config or DQNConfig()
         self.num_actions = int(action_space.n)
         goal_size, previous_size = spaces_sizes(observation_space)
-        self.q = DuelingQNetwork(self.num_actions, goal_size, previous_size, self.config.hidden).to(
-            self.device
-        )
+        _, options = network_options(observation_space, self.config)
+        self.q = DuelingQNetwork(
+            self.num_actions, goal_size, previous_size, self.config.hidden, **options
+        ).to(self.device)
         self.target = copy.deepcopy(self.q).requires_grad_(False)
         self.optimiser = adam(self.q.parameters(), self.config.learning_rate)
 

@@ -7,6 +7,12 @@ the features, then dense layers (the paper's single layer of 512 units; the
 released continuous SAC used 1024 then 512). Weights use variance-scaling (He)
 initialisation; output layers start near zero.
 
+On *features* (``features=n``: the observation is already a vector of ``n``
+features, such as those of a pretrained touch encoder,
+:mod:`~tactile_braille.agents.touch`) the encoder is left out and the
+vectors join the features directly. ``layer_norm=True`` puts a LayerNorm
+before each dense ReLU (as DroQ's critics), for high update-to-data ratios.
+
 A trunk may *share* another network's encoder (``encoder=...``): its features
 are then detached, so only the owner (the critic) trains it, as in SAC-AE and
 DrQ. The shared encoder is not a submodule of the borrower: it is neither in
@@ -37,6 +43,8 @@ def _init(module: nn.Module) -> None:
 class Encoder(nn.Module):
     """Conv 32/64/64 (8/4/3, strides 4/2/1) over a (B, 1, 100, 100) uint8 or float image."""
 
+    output_size = IMAGE_FEATURES
+
     def __init__(self) -> None:
         super().__init__()
         self.layers = nn.Sequential(
@@ -63,27 +71,49 @@ class GoalConditionedTrunk(nn.Module):
         vector_size: total length of the vectors joined after the encoder.
         hidden: units of each dense layer.
         encoder: another network's encoder to share (detached), or None for an own one.
+        features: the observation is a vector of this many features (no encoder).
+        layer_norm: a LayerNorm before each dense layer's ReLU.
     """
 
-    def __init__(self, vector_size: int, hidden: Sequence[int] = (512,), encoder: Encoder | None = None):
+    def __init__(
+        self,
+        vector_size: int,
+        hidden: Sequence[int] = (512,),
+        encoder: Encoder | None = None,
+        features: int | None = None,
+        layer_norm: bool = False,
+    ):
         super().__init__()
         if not hidden or min(hidden) < 1:
             raise ValueError(f"hidden needs at least one positive layer size, got {hidden}")
-        if encoder is None:
+        if features is not None and (features < 1 or encoder is not None):
+            raise ValueError(f"features={features} needs a positive size and no encoder")
+        self._shared: tuple[Encoder, ...] = ()
+        if features is not None:
+            self.encoder = None
+        elif encoder is None:
             self.encoder = Encoder()
-            self._shared: tuple[Encoder, ...] = ()
         else:
             self._shared = (encoder,)
-        sizes = [IMAGE_FEATURES + vector_size, *hidden]
+        sizes = [(features or Encoder.output_size) + vector_size, *hidden]
         layers: list[nn.Module] = []
         for inputs, outputs in itertools.pairwise(sizes):
-            layers += [nn.Linear(inputs, outputs), nn.ReLU()]
+            layers += [
+                nn.Linear(inputs, outputs),
+                *([nn.LayerNorm(outputs)] if layer_norm else []),
+                nn.ReLU(),
+            ]
         self.dense = nn.Sequential(*layers)
         self.dense.apply(_init)
         self.features = sizes[-1]
 
     def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:
-        features = self._shared[0](images).detach() if self._shared else self.encoder(images)
+        if self._shared:
+            features = self._shared[0](images).detach()
+        elif self.encoder is not None:
+            features = self.encoder(images)
+        else:
+            features = images.float()
         return self.dense(torch.cat([features, *vectors], dim=-1))
 
 
@@ -104,6 +134,7 @@ class DuelingQNetwork(nn.Module):
         previous_action_size: length of the previous-action vector.
         hidden: units of the dense layers (the paper's 512).
         encoder: an encoder to share (detached), or None.
+        options: ``features`` and ``layer_norm`` of :class:`GoalConditionedTrunk`.
     """
 
     def __init__(
@@ -113,9 +144,10 @@ class DuelingQNetwork(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        **options,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
         self.value = _small_head(self.trunk.features, 1)
         self.advantage = _small_head(self.trunk.features, num_actions)
 
@@ -137,9 +169,10 @@ class PolicyNetwork(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        **options,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
         self.logits = _small_head(self.trunk.features, num_actions)
 
     def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor]:
@@ -158,10 +191,11 @@ class ContinuousQNetwork(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        **options,
     ) -> None:
         super().__init__()
         vector_size = goal_size + previous_action_size + action_size
-        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder)
+        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
         self.q = _small_head(self.trunk.features, 1)
 
     def forward(self, images, goals, previous_actions, actions) -> torch.Tensor:
@@ -179,9 +213,10 @@ class GaussianPolicy(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        **options,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
         self.mean = _small_head(self.trunk.features, action_size)
         self.log_std = _small_head(self.trunk.features, action_size)
 
@@ -211,9 +246,10 @@ class DeterministicPolicy(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        **options,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
         self.action = _small_head(self.trunk.features, action_size)
 
     def forward(self, images, goals, previous_actions) -> torch.Tensor:

@@ -10,6 +10,18 @@ as the goal and the final reward set to 1. Time-outs are not relabelled (the
 achieved goal exists only at the final step, so the usual 'future' strategy
 does not apply). ``her=False`` turns it off.
 
+``relabel="all"`` (ours, not the paper's) relabels when sampling instead:
+the reward of a press depends only on which key was pressed and which was
+wanted, and the dynamics do not depend on the goal, so every transition is a
+valid transition for every goal. A sampled transition keeps its goal, or
+takes its episode's pressed key (the paper's relabelling, for every episode
+that ended in a press of a task key, right or wrong), or a uniformly random
+goal (a press of key k then teaches "not here" for the other goals). No
+copies are stored.
+
+Observations are tactile images or, for agents on a pretrained touch
+encoder, feature vectors (``observation_shape=(n,)``, stored as float32).
+
 Memory at the paper's capacity of 100,000 transitions: the frame ring holds
 twice as many frames as transitions (episodes of one step need two frames
 per transition) plus room for the episode in progress (whose frames are
@@ -20,12 +32,19 @@ written before its transitions are committed), about 200,000 x 1,250 bytes
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from tactile_braille._io import atomic_path
 
 PACKED_BYTES = 100 * 100 // 8
+RELABELLING = ("paper", "all")
+
+
+def _goal_index(one_hot: np.ndarray) -> int:
+    """Index of a goal one-hot, -1 for the zero vector (no key of the task)."""
+    return int(one_hot.argmax()) if one_hot.any() else -1
 
 
 class EpisodeReplayBuffer:
@@ -36,9 +55,15 @@ class EpisodeReplayBuffer:
         goal_size: length of the goal one-hots.
         action_shape: shape of one action (``()`` for discrete).
         previous_action_size: length of the previous-action vector.
-        her: relabel episodes that ended with a wrong press.
+        her: relabel with hindsight.
         max_episode_steps: the longest episode it will record (room is kept
             for the frames of the episode in progress).
+        relabel: ``"paper"`` (store copies of wrong-press episodes) or
+            ``"all"`` (relabel when sampling, see above).
+        relabel_final, relabel_random: with ``"all"``, the probabilities that
+            a sampled transition takes its episode's pressed key, or a random goal.
+        observation_shape: ``(100, 100, 1)`` for images (bit-packed), ``(n,)``
+            for feature vectors.
     """
 
     def __init__(
@@ -49,17 +74,37 @@ class EpisodeReplayBuffer:
         previous_action_size: int,
         her: bool = True,
         max_episode_steps: int = 100,
+        relabel: str = "paper",
+        relabel_final: float = 0.4,
+        relabel_random: float = 0.4,
+        observation_shape: tuple[int, ...] = (100, 100, 1),
     ) -> None:
         if capacity < 1:
             raise ValueError(f"capacity must be at least 1, got {capacity}")
         if max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
+        if relabel not in RELABELLING:
+            raise ValueError(f"relabel must be one of {RELABELLING}, got {relabel!r}")
+        if not (relabel_final >= 0 and relabel_random >= 0 and relabel_final + relabel_random <= 1):
+            raise ValueError(
+                f"relabel_final={relabel_final} and relabel_random={relabel_random} must be "
+                "probabilities that sum to at most 1"
+            )
+        self.images = tuple(observation_shape) == (100, 100, 1)
+        if not self.images and len(observation_shape) != 1:
+            raise ValueError(f"observations must be 100x100x1 images or vectors, got {observation_shape}")
         self.capacity = int(capacity)
         self.her = her
+        self.relabel = relabel
+        self.relabel_final, self.relabel_random = float(relabel_final), float(relabel_random)
+        self.goal_size = int(goal_size)
         self.max_episode_steps = int(max_episode_steps)
         # Committed transitions use at most 2 frames each; the episode in progress adds its own.
         self.frame_capacity = 2 * self.capacity + self.max_episode_steps + 1
-        self.frames = np.zeros((self.frame_capacity, PACKED_BYTES), dtype=np.uint8)
+        if self.images:
+            self.frames = np.zeros((self.frame_capacity, PACKED_BYTES), dtype=np.uint8)
+        else:
+            self.frames = np.zeros((self.frame_capacity, observation_shape[0]), dtype=np.float32)
         self.frame_index = np.zeros((self.capacity, 2), dtype=np.int64)  # (this, next)
         self.previous_actions = np.zeros((self.capacity, 2, previous_action_size), dtype=np.float32)
         self.goals = np.zeros((self.capacity, goal_size), dtype=np.float32)
@@ -67,6 +112,9 @@ class EpisodeReplayBuffer:
         self.actions = np.zeros((self.capacity, *action_shape), dtype=action_dtype)
         self.rewards = np.zeros(self.capacity, dtype=np.float32)
         self.dones = np.zeros(self.capacity, dtype=np.float32)
+        # Goal index of the key pressed at the step, and at the end of its episode (-1: none).
+        self.achieved = np.full(self.capacity, -1, dtype=np.int16)
+        self.finals = np.full(self.capacity, -1, dtype=np.int16)
         self.next_frame = 0
         self.frames_written = 0
         self._committed = (0, 0)  # (next_frame, frames_written) after the last committed episode
@@ -79,7 +127,10 @@ class EpisodeReplayBuffer:
     # --------------------------------------------------------- writing
     def _store_frame(self, image: np.ndarray) -> int:
         slot = self.next_frame
-        self.frames[slot] = np.packbits(np.asarray(image).reshape(-1) > 127)
+        if self.images:
+            self.frames[slot] = np.packbits(np.asarray(image).reshape(-1) > 127)
+        else:
+            self.frames[slot] = image
         self.next_frame = (self.next_frame + 1) % self.frame_capacity
         self.frames_written += 1
         return slot
@@ -116,21 +167,24 @@ class EpisodeReplayBuffer:
         self._current_frame, self._current_previous_action = next_frame, next_previous
 
     def end_episode(self) -> None:
-        """Commit the episode's transitions, and their hindsight copies (HER)."""
+        """Commit the episode's transitions, and their hindsight copies (the paper's HER)."""
+        final = _goal_index(self._episode[-1]["achieved"]) if self._episode else -1
         for step in self._episode:
-            self._add(step, step["goal"], step["reward"])
-        if self.her and self._episode:
+            self._add(step, step["goal"], step["reward"], final)
+        if self.her and self.relabel == "paper" and self._episode:
             last = self._episode[-1]
             wrong_press = last["achieved"].any() and not np.array_equal(last["achieved"], last["goal"])
             if wrong_press:
                 for i, step in enumerate(self._episode):
-                    self._add(step, last["achieved"], 1.0 if i == len(self._episode) - 1 else 0.0)
+                    self._add(step, last["achieved"], 1.0 if i == len(self._episode) - 1 else 0.0, final)
         self._episode = []
         self._current_frame = -1
         self._committed = (self.next_frame, self.frames_written)
 
-    def _add(self, step: dict, goal: np.ndarray, reward: float) -> None:
+    def _add(self, step: dict, goal: np.ndarray, reward: float, final: int) -> None:
         slot = self.next_slot
+        self.achieved[slot] = _goal_index(step["achieved"])
+        self.finals[slot] = final
         self.frame_index[slot] = step["frames"]
         self.previous_actions[slot, 0] = step["previous"][0]
         self.previous_actions[slot, 1] = step["previous"][1]
@@ -143,28 +197,72 @@ class EpisodeReplayBuffer:
 
     # --------------------------------------------------------- reading
     def _images(self, frames: np.ndarray) -> np.ndarray:
+        if not self.images:
+            return self.frames[frames]
         bits = np.unpackbits(self.frames[frames], axis=-1)
         return (bits.reshape(len(frames), 1, 100, 100) * 255).astype(np.uint8)
 
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """A uniform batch of transitions (images as (B, 1, 100, 100) uint8)."""
+        """A uniform batch of transitions (images as (B, 1, 100, 100) uint8, or features (B, n))."""
         if self.size == 0:
             raise RuntimeError("the replay buffer is empty")
         index = rng.integers(self.size, size=batch_size)
         frames = self.frame_index[index]
+        goals, rewards = self.goals[index], self.rewards[index]
+        if self.her and self.relabel == "all":
+            goals, rewards = self._relabel(index, rng)
         return {
             "images": self._images(frames[:, 0]),
             "previous_actions": self.previous_actions[index, 0],
-            "goals": self.goals[index],
+            "goals": goals,
             "actions": self.actions[index],
-            "rewards": self.rewards[index],
+            "rewards": rewards,
             "next_images": self._images(frames[:, 1]),
             "next_previous_actions": self.previous_actions[index, 1],
             "dones": self.dones[index],
         }
 
+    def _relabel(self, index: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Goals and rewards of sampled transitions under ``relabel="all"``."""
+        goal = self.goals[index].argmax(-1)
+        goal = np.where(self.goals[index].any(-1), goal, -1)
+        draw = rng.random(len(index))
+        final = self.finals[index].astype(np.int64)
+        to_final = (draw < self.relabel_final) & (final >= 0)
+        to_random = (draw >= self.relabel_final) & (draw < self.relabel_final + self.relabel_random)
+        goal = np.where(to_final, final, goal)
+        goal = np.where(to_random, rng.integers(self.goal_size, size=len(index)), goal)
+        goals = np.zeros((len(index), self.goal_size), dtype=np.float32)
+        has_goal = goal >= 0
+        goals[np.flatnonzero(has_goal), goal[has_goal]] = 1.0
+        rewards = ((self.achieved[index] == goal) & has_goal).astype(np.float32)
+        return goals, rewards
+
+    def map_observations(self, encode, observation_shape: tuple[int, ...], batch_size: int = 1024) -> None:
+        """Replace every stored observation by ``encode(images)`` (e.g. a touch encoder's features).
+
+        ``encode`` takes (B, 1, 100, 100) uint8 images and returns (B, n)
+        float32 features; transitions, goals and the episode in progress keep
+        their frame indices, so the buffer stays consistent.
+        """
+        if not self.images:
+            raise ValueError("this buffer holds features already")
+        if len(observation_shape) != 1:
+            raise ValueError(f"features must be vectors, got shape {observation_shape}")
+        written = min(self.frames_written, self.frame_capacity)
+        features = np.zeros((self.frame_capacity, observation_shape[0]), dtype=np.float32)
+        for start in range(0, written, batch_size):
+            frames = np.arange(start, min(start + batch_size, written))
+            features[frames] = encode(self._images(frames))
+        self.frames, self.images = features, False
+
     # ------------------------------------------------------ checkpoints
-    _ARRAYS = ("frames", "frame_index", "previous_actions", "goals", "actions", "rewards", "dones")
+    _ARRAYS = (
+        "frames", "frame_index", "previous_actions", "goals", "actions", "rewards", "dones",
+        "achieved", "finals",
+    )  # fmt: skip
+    _ADDED_LATER: ClassVar[dict[str, int]] = {"achieved": -1, "finals": -1}
+    """Arrays that older buffers lack, and their fill value (no key known)."""
 
     def save(self, path: str | Path) -> None:
         """Write the used part of the buffer (committed transitions) atomically as ``.npz``.
@@ -193,7 +291,11 @@ class EpisodeReplayBuffer:
                     f"{path}: written by a buffer with another frame ring "
                     "(its capacity or max_episode_steps differ)"
                 )
-            stored = {name: data[name] for name in self._ARRAYS}
+            size = int(data["counters"][3])
+            stored = {
+                name: data[name] if name in data else np.full(size, self._ADDED_LATER[name], dtype=np.int16)
+                for name in self._ARRAYS
+            }
             for name, array in stored.items():  # check everything before changing anything
                 mine = getattr(self, name)
                 if array.shape[1:] != mine.shape[1:] or len(array) > len(mine):

@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     GaussianPolicy,
@@ -40,6 +40,7 @@ class SACConfig:
         tau: Polyak factor of the target critics (the paper's polyak 0.995).
         batch_size: transitions per update.
         hidden: units of the dense layers (the paper's 512; the released code's 1024, 512).
+        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
         shared_encoder: the actor reuses the first critic's encoder, detached
             (not the paper's setting; as in SAC-AE and DrQ).
     """
@@ -51,6 +52,7 @@ class SACConfig:
     tau: float = 0.005
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
     shared_encoder: bool = False
 
     def __post_init__(self) -> None:
@@ -85,9 +87,12 @@ class SACAgent(Agent):
         self.action_size = _unit_box_size(action_space, "SAC")
         self.config = config = config or SACConfig()
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
-        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes) for _ in range(2)]).to(self.device)
-        shared = self.critics[0].trunk.encoder if config.shared_encoder else None
-        self.actor = GaussianPolicy(*sizes, encoder=shared).to(self.device)
+        actor_options, critic_options = network_options(observation_space, config)
+        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
+            self.device
+        )
+        shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
+        self.actor = GaussianPolicy(*sizes, encoder=shared, **actor_options).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
         self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
         self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)

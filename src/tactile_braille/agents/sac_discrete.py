@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
 from tactile_braille.agents.networks import DuelingQNetwork, PolicyNetwork, observation_tensors, soft_update
 
 
@@ -36,6 +36,7 @@ class DiscreteSACConfig:
         tau: Polyak factor of the target critics (per update).
         batch_size: transitions per update.
         hidden: units of the dense layers after the encoder.
+        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
         shared_encoder: the actor reuses the first critic's encoder, detached
             (not the paper's setting; as in SAC-AE and DrQ).
     """
@@ -47,6 +48,7 @@ class DiscreteSACConfig:
     tau: float = 0.005
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
     shared_encoder: bool = False
 
     def __post_init__(self) -> None:
@@ -83,9 +85,12 @@ class DiscreteSACAgent(Agent):
         self.config = config = config or DiscreteSACConfig()
         self.num_actions = int(action_space.n)
         sizes = (self.num_actions, *spaces_sizes(observation_space), config.hidden)
-        self.critics = nn.ModuleList([DuelingQNetwork(*sizes) for _ in range(2)]).to(self.device)
-        shared = self.critics[0].trunk.encoder if config.shared_encoder else None
-        self.actor = PolicyNetwork(*sizes, encoder=shared).to(self.device)
+        actor_options, critic_options = network_options(observation_space, config)
+        self.critics = nn.ModuleList([DuelingQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
+            self.device
+        )
+        shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
+        self.actor = PolicyNetwork(*sizes, encoder=shared, **actor_options).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
         self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
         self.target_entropy = config.target_entropy_ratio * math.log(self.num_actions)

@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, spaces_sizes
+from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     DeterministicPolicy,
@@ -45,6 +45,7 @@ class TD3Config:
         policy_delay: critic updates per actor (and target) update.
         batch_size: transitions per update.
         hidden: units of the dense layers.
+        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
         shared_encoder: the actor reuses the first critic's encoder, detached (not the paper's).
     """
 
@@ -60,6 +61,7 @@ class TD3Config:
     policy_delay: int = 2
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
     shared_encoder: bool = False
 
     def __post_init__(self) -> None:
@@ -97,12 +99,17 @@ class TD3Agent(Agent):
         if config.policy_delay < 1:
             raise ValueError(f"policy_delay must be at least 1, got {config.policy_delay}")
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
-        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes) for _ in range(2)]).to(self.device)
-        shared = self.critics[0].trunk.encoder if config.shared_encoder else None
-        self.actor = DeterministicPolicy(*sizes, encoder=shared).to(self.device)
+        actor_options, critic_options = network_options(observation_space, config)
+        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
+            self.device
+        )
+        shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
+        self.actor = DeterministicPolicy(*sizes, encoder=shared, **actor_options).to(self.device)
         self.critic_targets = copy.deepcopy(self.critics).requires_grad_(False)
         target_shared = self.critic_targets[0].trunk.encoder if config.shared_encoder else None
-        self.actor_target = DeterministicPolicy(*sizes, encoder=target_shared).to(self.device)
+        self.actor_target = DeterministicPolicy(*sizes, encoder=target_shared, **actor_options).to(
+            self.device
+        )
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.actor_target.requires_grad_(False)
         self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)

@@ -28,10 +28,18 @@ from tactile_braille._io import atomic_path
 from tactile_braille._registration import ENV_IDS
 from tactile_braille.agents.common import PRECISIONS
 from tactile_braille.agents.dqn import DQNAgent, DQNConfig
-from tactile_braille.agents.replay import EpisodeReplayBuffer
+from tactile_braille.agents.replay import RELABELLING, EpisodeReplayBuffer
 from tactile_braille.agents.sac import SACAgent, SACConfig
 from tactile_braille.agents.sac_discrete import DiscreteSACAgent, DiscreteSACConfig
 from tactile_braille.agents.td3 import TD3Agent, TD3Config
+from tactile_braille.agents.touch import (
+    LabelledTaps,
+    TouchAgent,
+    TouchEncoder,
+    TouchEncoderConfig,
+    feature_space,
+    fit_touch_encoder,
+)
 
 
 class Algorithm(NamedTuple):
@@ -72,10 +80,17 @@ class TrainConfig:
         update_every: updates happen in bursts every this many steps
             (``update_every * updates_per_step`` at a time; the released TD3 used 100).
         replay_capacity: transitions kept (100,000).
-        her: hindsight relabelling of wrong presses.
+        her: hindsight relabelling.
+        relabel: ``"paper"`` (copies of wrong-press episodes, the paper's) or
+            ``"all"`` (every transition for every goal, relabelled when sampled;
+            :mod:`~tactile_braille.agents.replay`).
+        touch_encoder: fit a touch encoder on the labelled taps of the first
+            ``start_steps`` and learn on its features
+            (:mod:`~tactile_braille.agents.touch`); not the paper's.
+        touch_epochs: passes of the touch encoder's fit over those taps.
         test_episodes: deterministic test episodes after each epoch.
         max_episode_steps: episode cut (None: the registry's 25).
-        backend: environment backend (``dataset`` or ``render``).
+        backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
         dataset: dataset path for the dataset backend (default: the cached one).
         device: torch device (``cpu``, ``cuda``).
         precision: ``fp32`` or ``bf16`` (autocast in the updates).
@@ -97,6 +112,9 @@ class TrainConfig:
     update_every: int = 1
     replay_capacity: int = 100_000
     her: bool = True
+    relabel: str = "paper"
+    touch_encoder: bool = False
+    touch_epochs: int = 40
     test_episodes: int = 20
     max_episode_steps: int | None = None
     backend: str = "dataset"
@@ -136,6 +154,14 @@ class TrainConfig:
         for name in ("start_steps", "updates_per_step", "snapshots"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must not be negative, got {getattr(self, name)}")
+        if self.relabel not in RELABELLING:
+            raise ValueError(f"relabel must be one of {RELABELLING}, got {self.relabel!r}")
+        if self.touch_encoder and self.start_steps < 10:
+            raise ValueError(
+                f"a touch encoder learns from the start steps: need at least 10, got {self.start_steps}"
+            )
+        if self.touch_epochs < 1:
+            raise ValueError(f"touch_epochs must be at least 1, got {self.touch_epochs}")
         if self.max_episode_steps is not None and self.max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be at least 1, got {self.max_episode_steps}")
 
@@ -159,26 +185,38 @@ class TrainConfig:
         return dataclasses.replace(self, **changes)
 
 
-def make_env(config: TrainConfig) -> gym.Env:
-    """The task's environment as the run configures it (other goal-conditioned ids are made as they are)."""
+def make_env(config: TrainConfig, rig=None) -> gym.Env:
+    """The task's environment as the run configures it (other goal-conditioned ids are made as they are).
+
+    ``rig`` is the :class:`~tactile_braille.rigs.base.Rig` that ``backend="rig"`` taps: hardware is
+    handed in, not configured, so a run folder never names one.
+    """
     kwargs: dict[str, Any] = {}
     if config.task.startswith("tactile_braille/"):
         kwargs["backend"] = config.backend
         if config.dataset is not None:
             kwargs["dataset"] = config.dataset
+        if rig is not None:
+            kwargs["rig"] = rig
     if config.max_episode_steps is not None:
         kwargs["max_episode_steps"] = config.max_episode_steps
     return gym.make(config.task, **kwargs)
 
 
 def make_agent(config: TrainConfig, env: gym.Env):
-    """The run's agent for the task's spaces."""
+    """The run's agent for the task's spaces (a :class:`TouchAgent` with ``touch_encoder``)."""
     algorithm = AGENTS[config.algo]
     if isinstance(env.action_space, gym.spaces.Box) != algorithm.continuous:
         raise ValueError(f"{config.algo} cannot act in {config.task}'s action space {env.action_space}")
-    return algorithm.agent(
-        env.observation_space, env.action_space, config.agent, config.device, config.precision
-    )
+    if not config.touch_encoder:
+        return algorithm.agent(
+            env.observation_space, env.action_space, config.agent, config.device, config.precision
+        )
+    keys = env.observation_space["desired_goal"].shape[0]
+    encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden)
+    space = feature_space(env.observation_space, encoder.features_size)
+    agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
+    return TouchAgent(agent, encoder)
 
 
 def evaluate(agent, env: gym.Env, episodes: int, seed: int) -> dict[str, float]:
@@ -238,14 +276,21 @@ def train(
     run_dir: str | Path | None = None,
     resume: bool = False,
     progress: bool = True,
+    rig=None,
 ) -> Path:
-    """Train (or, with ``resume``, continue) a run; returns its folder."""
+    """Train (or, with ``resume``, continue) a run; returns its folder. ``rig``: see :func:`make_env`."""
     config, run_dir = _open_run(config, run_dir, resume)
     torch.set_num_threads(config.threads)
-    env, test_env = make_env(config), make_env(config)
+    env, test_env = make_env(config, rig), make_env(config, rig)
     torch.manual_seed(config.seed)  # before the networks are made: the seed fixes their initial weights
     agent = make_agent(config, env)
     action_shape = env.action_space.shape if AGENTS[config.algo].continuous else ()  # checked by make_agent
+    checkpoint = run_dir / "checkpoint.pt"
+    state = None
+    if resume and checkpoint.exists():
+        state = torch.load(checkpoint, weights_only=False, map_location=agent.device)
+        agent.load_state_dict(state["agent"])
+    touch = isinstance(agent, TouchAgent)
     buffer = EpisodeReplayBuffer(
         config.replay_capacity,
         env.observation_space["desired_goal"].shape[0],
@@ -253,19 +298,35 @@ def train(
         env.observation_space["previous_action"].shape[0],
         her=config.her,
         max_episode_steps=max(getattr(env.spec, "max_episode_steps", None) or 0, 100),
+        relabel=config.relabel,
+        observation_shape=(agent.touch.features_size,) if touch and agent.fitted else (100, 100, 1),
     )
+    # A touch-encoder run keeps its first steps' taps with their labels until the encoder is fitted.
+    taps = LabelledTaps() if touch and not agent.fitted else None
     rng = np.random.default_rng(config.seed)
     start_epoch, env_steps, updates = 0, 0, 0
-    checkpoint = run_dir / "checkpoint.pt"
-    if resume and checkpoint.exists():
-        state = torch.load(checkpoint, weights_only=False, map_location=agent.device)
-        agent.load_state_dict(state["agent"])
+    if state is not None:
         rng.bit_generator.state = state["rng"]
         torch.set_rng_state(state["torch_rng"].cpu())
         if state.get("cuda_rng") is not None and torch.cuda.is_available():
             torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
         start_epoch, env_steps, updates = state["epoch"] + 1, state["env_steps"], state["updates"]
         buffer.load(run_dir / state["replay"])
+        if taps is not None and state.get("taps"):
+            taps.load(run_dir / state["taps"])
+
+    def stored(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """What the replay keeps of an observation: the image, or the fitted encoder's features."""
+        return agent.features(observation) if touch and agent.fitted else observation
+
+    def fit_touch() -> None:
+        encoder, metrics = fit_touch_encoder(
+            taps, buffer.goal_size, TouchEncoderConfig(epochs=config.touch_epochs), config.seed, agent.device
+        )
+        agent.fit(encoder)
+        buffer.map_observations(agent.touch.encode, (agent.touch.features_size,))
+        with atomic_path(run_dir / "touch.json") as temporary:
+            temporary.write_text(json.dumps({**metrics, "env_steps": env_steps}, indent=2))
 
     def random_action():
         if action_shape:
@@ -278,8 +339,10 @@ def train(
         from tqdm.auto import tqdm
 
         bar = tqdm(total=config.epochs, initial=start_epoch, desc=run_dir.name, unit="epoch")
-    observation, _ = env.reset(seed=int(rng.integers(2**31)))
-    buffer.start_episode(observation)
+    observation, info = env.reset(seed=int(rng.integers(2**31)))
+    if taps is not None:
+        taps.add_observation(observation, info)
+    buffer.start_episode(stored(observation))
     episode_return, recent_returns, losses = 0.0, [], {}
     burst = config.update_every * config.updates_per_step
     try:
@@ -290,16 +353,23 @@ def train(
                     action = random_action()
                 else:
                     action = agent.policy_action(observation, env_steps, explore=True, rng=rng)
-                observation, reward, terminated, truncated, _ = env.step(action)
-                buffer.add_step(action, reward, observation, terminated)
+                observation, reward, terminated, truncated, info = env.step(action)
+                if taps is not None:
+                    taps.add_observation(observation, info)
+                buffer.add_step(action, reward, stored(observation), terminated)
                 episode_return += reward
                 env_steps += 1
                 if terminated or truncated:
                     buffer.end_episode()
                     recent_returns.append(episode_return)
                     episode_return = 0.0
-                    observation, _ = env.reset(seed=int(rng.integers(2**31)))
-                    buffer.start_episode(observation)
+                    observation, info = env.reset(seed=int(rng.integers(2**31)))
+                    if taps is not None and env_steps < config.start_steps:
+                        taps.add_observation(observation, info)
+                    buffer.start_episode(stored(observation))
+                if taps is not None and env_steps >= config.start_steps:
+                    fit_touch()
+                    taps = None
                 if (
                     env_steps >= config.start_steps
                     and env_steps % config.update_every == 0
@@ -335,7 +405,7 @@ def train(
                 with atomic_path(run_dir / "snapshots" / f"epoch_{epoch:04d}.pt") as temporary:
                     torch.save(agent.policy_state_dict(), temporary)
             if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
-                _save_checkpoint(run_dir, agent, buffer, rng, epoch, env_steps, updates)
+                _save_checkpoint(run_dir, agent, buffer, rng, epoch, env_steps, updates, taps)
     finally:
         if bar is not None:
             bar.close()
@@ -351,24 +421,30 @@ def snapshot_epochs(epochs: int, snapshots: int) -> set[int]:
     return {round(float(e)) for e in np.linspace(0, epochs - 1, min(snapshots, epochs))}
 
 
-def _save_checkpoint(run_dir: Path, agent, buffer, rng, epoch: int, env_steps: int, updates: int) -> None:
-    """Write the replay buffer, then the checkpoint that names it, then drop older buffers.
+def _save_checkpoint(
+    run_dir: Path, agent, buffer, rng, epoch: int, env_steps: int, updates: int, taps: LabelledTaps | None
+) -> None:
+    """Write the replay buffer (and labelled taps), then the checkpoint that names them, then drop older ones.
 
     Each step is atomic, so a crash anywhere leaves the previous checkpoint and
-    the buffer it names intact. The episode in progress is not saved: it
+    the files it names intact. The episode in progress is not saved: it
     restarts on resume.
     """
     replay = f"replay.{epoch}.npz"
     buffer.save(run_dir / replay)
+    taps_file = None
+    if taps is not None:
+        taps_file = f"taps.{epoch}.npz"
+        taps.save(run_dir / taps_file)
     state = {
         "agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
         "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
-        "epoch": epoch, "env_steps": env_steps, "updates": updates, "replay": replay,
+        "epoch": epoch, "env_steps": env_steps, "updates": updates, "replay": replay, "taps": taps_file,
     }  # fmt: skip
     with atomic_path(run_dir / "checkpoint.pt", fsync=True) as temporary:
         torch.save(state, temporary)
-    for old in run_dir.glob("replay.*.npz"):
-        if old.name != replay:
+    for old in [*run_dir.glob("replay.*.npz"), *run_dir.glob("taps.*.npz")]:
+        if old.name not in (replay, taps_file):
             old.unlink()
 
 

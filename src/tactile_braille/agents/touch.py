@@ -1,0 +1,274 @@
+"""A touch encoder learnt from the run's own first taps, labelled by what the robot knows.
+
+A robot knows two things about every tap without touch: where the sensor was
+(the arm's kinematics) and which key, if any, the keyboard reported. During
+its first ``start_steps`` (random actions, as in the paper) a run keeps each
+tactile image with those two labels; then it fits a CNN (the paper's
+encoder, a projection to a few features) to predict the pose and the pressed
+key from the image, freezes it, and the reinforcement learner works on its
+features: the replay stores features and the updates are dense layers only.
+
+No data is added: the labelled taps are the run's own first steps and are
+counted in its epochs. Nothing about the goal or the reward is used.
+
+>>> import numpy as np
+>>> taps = LabelledTaps()
+>>> taps.add(np.zeros((100, 100, 1), np.uint8), np.array([0.0, 1.0, 4.0]), pressed=-1)
+>>> len(taps)
+1
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from tactile_braille.agents.common import adam
+from tactile_braille.agents.networks import Encoder
+
+
+@dataclass(frozen=True)
+class TouchEncoderConfig:
+    """How the touch encoder is made and fitted.
+
+    Attributes:
+        features: length of the feature vector the agent sees.
+        hidden: units of the projection between the convolutions and the features.
+        epochs: passes over the labelled taps.
+        batch_size: taps per gradient step.
+        learning_rate: Adam's step size.
+        validation: fraction of the taps held out to report the fit.
+    """
+
+    features: int = 64
+    hidden: int = 256
+    epochs: int = 40
+    batch_size: int = 64
+    learning_rate: float = 1e-3
+    validation: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("features", "hidden", "epochs", "batch_size"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"TouchEncoderConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.learning_rate <= 0:
+            raise ValueError(f"TouchEncoderConfig.learning_rate must be positive, got {self.learning_rate}")
+        if not 0.0 <= self.validation < 1.0:
+            raise ValueError(f"TouchEncoderConfig.validation must be in [0, 1), got {self.validation}")
+
+
+class TouchEncoder(nn.Module):
+    """The paper's convolutions, a projection to ``features`` (layer-normalised), and two heads.
+
+    The heads predict the sensor pose (x, y, depth in mm, through the
+    labels' mean and spread kept as buffers) and the pressed key (``keys``
+    task keys, and a last class for none or another key).
+    """
+
+    def __init__(self, keys: int, features: int = 64, hidden: int = 256) -> None:
+        super().__init__()
+        self.encoder = Encoder()
+        self.project = nn.Sequential(
+            nn.Linear(Encoder.output_size, hidden),
+            nn.ReLU(),
+            nn.Linear(hidden, features),
+            nn.LayerNorm(features),
+        )
+        self.pose = nn.Linear(features, 3)
+        self.key = nn.Linear(features, keys + 1)
+        self.register_buffer("pose_mean", torch.zeros(3))
+        self.register_buffer("pose_scale", torch.ones(3))
+        self.keys, self.features_size = keys, features
+
+    def features(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, features) from (B, 1, 100, 100) images."""
+        return self.project(self.encoder(images))
+
+    def forward(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised pose predictions (B, 3) and key logits (B, keys + 1)."""
+        features = self.features(images)
+        return self.pose(features), self.key(features)
+
+    @torch.no_grad()
+    def encode(self, images: np.ndarray) -> np.ndarray:
+        """Features of uint8 images ((B, 1, 100, 100) or (B, 100, 100, 1)) as float32 (B, features)."""
+        images = np.asarray(images)
+        if images.ndim == 4 and images.shape[-1] == 1:
+            images = np.moveaxis(images, -1, 1)
+        device = self.pose_mean.device
+        return self.features(torch.as_tensor(images, device=device)).float().cpu().numpy()
+
+
+class LabelledTaps:
+    """Tactile images with the pose the arm reports and the key the keyboard reports (-1: none)."""
+
+    def __init__(self) -> None:
+        self.images: list[np.ndarray] = []
+        self.poses: list[np.ndarray] = []
+        self.pressed: list[int] = []
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def add(self, image: np.ndarray, pose_mm: np.ndarray, pressed: int) -> None:
+        """One tap: a 100x100 image, the sensor's (x, y, depth) in mm, the pressed task key's index."""
+        self.images.append(np.asarray(image, dtype=np.uint8).reshape(100, 100))
+        self.poses.append(np.asarray(pose_mm, dtype=np.float32)[:3])
+        self.pressed.append(int(pressed))
+
+    def add_observation(self, observation: dict[str, np.ndarray], info: dict) -> None:
+        """A tap as an environment reports it (``sensor_pose_mm`` in info, the achieved goal)."""
+        achieved = observation["achieved_goal"]
+        self.add(
+            observation["observation"],
+            info["sensor_pose_mm"],
+            int(achieved.argmax()) if achieved.any() else -1,
+        )
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Images (N, 1, 100, 100) uint8, poses (N, 3) float32, pressed keys (N,) int64."""
+        return np.stack(self.images)[:, None], np.stack(self.poses), np.array(self.pressed, dtype=np.int64)
+
+    def save(self, path) -> None:
+        """Write the taps atomically (``.npz``), for a run that checkpoints before its encoder is fitted."""
+        from tactile_braille._io import atomic_path
+
+        images, poses, pressed = self.arrays() if len(self) else (np.zeros((0, 1, 100, 100), np.uint8),
+                                                                  np.zeros((0, 3), np.float32),
+                                                                  np.zeros(0, np.int64))  # fmt: skip
+        with atomic_path(path, fsync=True) as temporary, open(temporary, "wb") as handle:
+            np.savez_compressed(handle, images=images, poses=poses, pressed=pressed)
+
+    def load(self, path) -> None:
+        """Replace the taps by those :meth:`save` wrote."""
+        with np.load(path) as data:
+            images, poses, pressed = data["images"], data["poses"], data["pressed"]
+        if not (len(images) == len(poses) == len(pressed)):
+            raise ValueError(f"{path}: images, poses and keys differ in number")
+        self.images = [image[0] for image in images]
+        self.poses = list(poses)
+        self.pressed = [int(p) for p in pressed]
+
+
+def fit_touch_encoder(
+    taps: LabelledTaps,
+    keys: int,
+    config: TouchEncoderConfig | None = None,
+    seed: int = 0,
+    device: str | torch.device = "cpu",
+) -> tuple[TouchEncoder, dict[str, float]]:
+    """Fit a :class:`TouchEncoder` to labelled taps; returns it (frozen, eval mode) and held-out figures.
+
+    The figures, on the held-out taps: ``touch/pose_error_mm`` (median
+    distance in the plane), ``touch/depth_error_mm`` (median), and
+    ``touch/key_accuracy`` (pressed key, "none" included), plus the number of
+    taps (``touch/taps``).
+    """
+    config = config or TouchEncoderConfig()
+    if len(taps) < 10:
+        raise ValueError(f"the touch encoder needs at least 10 labelled taps, got {len(taps)}")
+    images, poses, pressed = taps.arrays()
+    if pressed.max() >= keys:
+        raise ValueError(f"a tap is labelled with key {pressed.max()}, but the task has {keys} keys")
+    generator = torch.Generator().manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(len(taps))
+    held = order[: round(config.validation * len(taps))]
+    train = order[len(held) :]
+    device = torch.device(device)
+    model = TouchEncoder(keys, config.features, config.hidden).to(device)
+    mean, scale = poses[train].mean(0), poses[train].std(0) + 1e-3
+    model.pose_mean.copy_(torch.as_tensor(mean))
+    model.pose_scale.copy_(torch.as_tensor(scale))
+    images_t = torch.as_tensor(images, device=device)
+    targets = torch.as_tensor((poses - mean) / scale, device=device)
+    labels = torch.as_tensor(np.where(pressed < 0, keys, pressed), device=device)
+    optimiser = adam(model.parameters(), config.learning_rate)
+    steps = config.epochs * math.ceil(len(train) / config.batch_size)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, config.learning_rate, total_steps=steps)
+    model.train()
+    for _ in range(config.epochs):
+        for batch in torch.randperm(len(train), generator=generator).split(config.batch_size):
+            index = torch.as_tensor(train, device=device)[batch.to(device)]
+            pose, logits = model(images_t[index])
+            loss = F.smooth_l1_loss(pose, targets[index]) + F.cross_entropy(logits, labels[index])
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+            schedule.step()
+    model.eval().requires_grad_(False)
+    metrics = {"touch/taps": float(len(taps))}
+    if len(held):
+        with torch.no_grad():
+            pose, logits = model(images_t[torch.as_tensor(held, device=device)])
+        error = (pose.cpu().numpy() - targets[held].cpu().numpy()) * scale
+        metrics["touch/pose_error_mm"] = float(np.median(np.linalg.norm(error[:, :2], axis=-1)))
+        metrics["touch/depth_error_mm"] = float(np.median(np.abs(error[:, 2])))
+        metrics["touch/key_accuracy"] = float((logits.argmax(-1).cpu() == labels[held].cpu()).float().mean())
+    return model, metrics
+
+
+class TouchAgent:
+    """An agent that acts on a touch encoder's features of the tactile image.
+
+    Its ``policy_action`` takes the environment's observation (with the
+    image), so evaluation, typing and trajectory figures work unchanged;
+    its ``update`` takes replay batches of features. The encoder is part of
+    its state and of its policy snapshots.
+
+    Args:
+        agent: an agent built for feature observations (:func:`feature_space`).
+        encoder: the touch encoder (fitted later by the training loop, or loaded).
+    """
+
+    def __init__(self, agent, encoder: TouchEncoder) -> None:
+        self.agent, self.touch = agent, encoder.to(agent.device).eval().requires_grad_(False)
+        self.device, self.config, self.precision = agent.device, agent.config, agent.precision
+        self.fitted = False
+
+    def features(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The observation with its image replaced by the encoder's features."""
+        return {**observation, "observation": self.touch.encode(observation["observation"][None])[0]}
+
+    def policy_action(self, observation: dict, *args, **kwargs):
+        return self.agent.policy_action(self.features(observation), *args, **kwargs)
+
+    def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        return self.agent.update(batch)
+
+    def fit(self, encoder: TouchEncoder) -> None:
+        """Take a fitted encoder's weights."""
+        self.touch.load_state_dict(encoder.state_dict())
+        self.fitted = True
+
+    def state_dict(self) -> dict:
+        return {**self.agent.state_dict(), "touch": self.touch.state_dict(), "touch_fitted": self.fitted}
+
+    def load_state_dict(self, state: dict) -> None:
+        if "touch" not in state:
+            raise ValueError("checkpoint lacks the touch encoder of a touch-encoder run")
+        self.agent.load_state_dict({k: v for k, v in state.items() if k not in ("touch", "touch_fitted")})
+        self.touch.load_state_dict(state["touch"])
+        self.fitted = bool(state.get("touch_fitted", True))
+
+    def policy_state_dict(self) -> dict:
+        return {**self.agent.policy_state_dict(), "touch": self.touch.state_dict()}
+
+    def load_policy_state_dict(self, state: dict) -> None:
+        if "touch" not in state:
+            raise ValueError("policy snapshot lacks the touch encoder of a touch-encoder run")
+        self.agent.load_policy_state_dict({k: v for k, v in state.items() if k != "touch"})
+        self.touch.load_state_dict(state["touch"])
+
+
+def feature_space(observation_space: gym.spaces.Dict, features: int) -> gym.spaces.Dict:
+    """The observation space with the image replaced by ``features`` float32 features."""
+    spaces = dict(observation_space.spaces)
+    spaces["observation"] = gym.spaces.Box(-np.inf, np.inf, (features,), dtype=np.float32)
+    return gym.spaces.Dict(spaces)
