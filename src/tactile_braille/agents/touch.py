@@ -1,11 +1,13 @@
 """A touch encoder learnt from the run's own first taps, labelled by what the robot knows.
 
-A robot knows two things about every tap without touch: where the sensor was
-(the arm's kinematics) and which key, if any, the keyboard reported. During
+A robot knows three things about every tap without touch: where the sensor
+was (the arm's kinematics), which key lies under it there (the calibrated
+keyboard layout, :class:`KeyLocator`) and which key, if any, the keyboard
+reported. During
 its first ``start_steps`` (random actions, as in the paper) a run keeps each
 tactile image with those two labels; then it fits a CNN (the paper's
-encoder, a projection to a few features) to predict the pose and the pressed
-key from the image, freezes it, and the reinforcement learner works on its
+encoder, a projection to a few features) to predict the pose, the key under the
+sensor and the pressed key from the image, freezes it, and the reinforcement learner works on its
 features: the replay stores features and the updates are dense layers only.
 
 No data is added: the labelled taps are the run's own first steps and are
@@ -64,11 +66,12 @@ class TouchEncoderConfig:
 
 
 class TouchEncoder(nn.Module):
-    """The paper's convolutions, a projection to ``features`` (layer-normalised), and two heads.
+    """The paper's convolutions, a projection to ``features`` (layer-normalised), and three heads.
 
     The heads predict the sensor pose (x, y, depth in mm, through the
-    labels' mean and spread kept as buffers) and the pressed key (``keys``
-    task keys, and a last class for none or another key).
+    labels' mean and spread kept as buffers), the pressed key and the key
+    under the sensor (each over the ``keys`` task keys and a last class for
+    none or another key).
     """
 
     def __init__(self, keys: int, features: int = 64, hidden: int = 256) -> None:
@@ -82,6 +85,7 @@ class TouchEncoder(nn.Module):
         )
         self.pose = nn.Linear(features, 3)
         self.key = nn.Linear(features, keys + 1)
+        self.under = nn.Linear(features, keys + 1)
         self.register_buffer("pose_mean", torch.zeros(3))
         self.register_buffer("pose_scale", torch.ones(3))
         self.keys, self.features_size = keys, features
@@ -91,9 +95,14 @@ class TouchEncoder(nn.Module):
         return self.project(self.encoder(images))
 
     def forward(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Normalised pose predictions (B, 3) and key logits (B, keys + 1)."""
+        """Normalised pose predictions (B, 3) and pressed-key logits (B, keys + 1)."""
         features = self.features(images)
         return self.pose(features), self.key(features)
+
+    def heads(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Pose predictions, pressed-key logits and under-the-sensor logits."""
+        features = self.features(images)
+        return self.pose(features), self.key(features), self.under(features)
 
     @torch.no_grad()
     def encode(self, images: np.ndarray) -> np.ndarray:
@@ -105,31 +114,54 @@ class TouchEncoder(nn.Module):
         return self.features(torch.as_tensor(images, device=device)).float().cpu().numpy()
 
 
+class KeyLocator:
+    """The task key whose cell (keycap plus its share of the gap) holds a keyboard-frame position.
+
+    Args:
+        layout: the keyboard (calibrated: its frame is the rig's).
+        keys: the task's keys, in goal order.
+    """
+
+    def __init__(self, layout, keys) -> None:
+        self.centres = np.array([layout.centre_mm(k) for k in keys])
+        self.half = np.array([layout.key(k).footprint_mm for k in keys]) / 2
+
+    def __call__(self, pose_mm: np.ndarray) -> int:
+        """Goal index of the key under (x, y), -1 for none of the task's keys."""
+        inside = np.flatnonzero((np.abs(self.centres - np.asarray(pose_mm)[:2]) < self.half).all(-1))
+        return int(inside[0]) if len(inside) else -1
+
+
 class LabelledTaps:
-    """Tactile images with the pose the arm reports and the key the keyboard reports (-1: none)."""
+    """Tactile images with the arm's pose, the key under the sensor and the key the keyboard reports.
+
+    Keys are goal indices, -1 for none (or a key outside the task).
+    """
 
     def __init__(self) -> None:
         self.images: list[np.ndarray] = []
         self.poses: list[np.ndarray] = []
         self.pressed: list[int] = []
+        self.under: list[int] = []
 
     def __len__(self) -> int:
         return len(self.images)
 
-    def add(self, image: np.ndarray, pose_mm: np.ndarray, pressed: int) -> None:
-        """One tap: a 100x100 image, the sensor's (x, y, depth) in mm, the pressed task key's index."""
+    def add(self, image: np.ndarray, pose_mm: np.ndarray, pressed: int, under: int = -1) -> None:
+        """One tap: a 100x100 image, the sensor's (x, y, depth) in mm, the pressed key, the key under it."""
         self.images.append(np.asarray(image, dtype=np.uint8).reshape(100, 100))
         self.poses.append(np.asarray(pose_mm, dtype=np.float32)[:3])
         self.pressed.append(int(pressed))
+        self.under.append(int(under))
 
-    def add_observation(self, observation: dict[str, np.ndarray], info: dict) -> None:
+    def add_observation(
+        self, observation: dict[str, np.ndarray], info: dict, locate: KeyLocator | None = None
+    ) -> None:
         """A tap as an environment reports it (``sensor_pose_mm`` in info, the achieved goal)."""
         achieved = observation["achieved_goal"]
-        self.add(
-            observation["observation"],
-            info["sensor_pose_mm"],
-            int(achieved.argmax()) if achieved.any() else -1,
-        )
+        pose = info["sensor_pose_mm"]
+        pressed = int(achieved.argmax()) if achieved.any() else -1
+        self.add(observation["observation"], pose, pressed, locate(pose) if locate is not None else -1)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Images (N, 1, 100, 100) uint8, poses (N, 3) float32, pressed keys (N,) int64."""
@@ -143,17 +175,25 @@ class LabelledTaps:
                                                                   np.zeros((0, 3), np.float32),
                                                                   np.zeros(0, np.int64))  # fmt: skip
         with atomic_path(path, fsync=True) as temporary, open(temporary, "wb") as handle:
-            np.savez_compressed(handle, images=images, poses=poses, pressed=pressed)
+            np.savez_compressed(
+                handle,
+                images=images,
+                poses=poses,
+                pressed=pressed,
+                under=np.array(self.under, dtype=np.int64),
+            )
 
     def load(self, path) -> None:
         """Replace the taps by those :meth:`save` wrote."""
         with np.load(path) as data:
             images, poses, pressed = data["images"], data["poses"], data["pressed"]
-        if not (len(images) == len(poses) == len(pressed)):
+            under = data["under"] if "under" in data else np.full(len(pressed), -1)
+        if not (len(images) == len(poses) == len(pressed) == len(under)):
             raise ValueError(f"{path}: images, poses and keys differ in number")
         self.images = [image[0] for image in images]
         self.poses = list(poses)
         self.pressed = [int(p) for p in pressed]
+        self.under = [int(u) for u in under]
 
 
 def fit_touch_encoder(
@@ -166,20 +206,24 @@ def fit_touch_encoder(
     """Fit a :class:`TouchEncoder` to labelled taps; returns it (frozen, eval mode) and held-out figures.
 
     The figures, on the held-out taps: ``touch/pose_error_mm`` (median
-    distance in the plane), ``touch/depth_error_mm`` (median), and
-    ``touch/key_accuracy`` (pressed key, "none" included), plus the number of
-    taps (``touch/taps``).
+    distance in the plane), ``touch/depth_error_mm`` (median),
+    ``touch/key_accuracy`` (pressed key, "none" included),
+    ``touch/under_accuracy`` (key under the sensor, "none" included), plus
+    the number of taps (``touch/taps``).
     """
     config = config or TouchEncoderConfig()
     if len(taps) < 10:
         raise ValueError(f"the touch encoder needs at least 10 labelled taps, got {len(taps)}")
     images, poses, pressed = taps.arrays()
-    if pressed.max() >= keys:
-        raise ValueError(f"a tap is labelled with key {pressed.max()}, but the task has {keys} keys")
+    under = np.array(taps.under, dtype=np.int64)
+    if max(pressed.max(), under.max()) >= keys:
+        raise ValueError(
+            f"a tap is labelled with key {max(pressed.max(), under.max())}, but the task has {keys} keys"
+        )
     generator = torch.Generator().manual_seed(seed)
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(taps))
-    held = order[: round(config.validation * len(taps))]
+    held = order[: min(round(config.validation * len(taps)), len(taps) - 1)]  # keep one tap to train on
     train = order[len(held) :]
     device = torch.device(device)
     model = TouchEncoder(keys, config.features, config.hidden).to(device)
@@ -189,6 +233,7 @@ def fit_touch_encoder(
     images_t = torch.as_tensor(images, device=device)
     targets = torch.as_tensor((poses - mean) / scale, device=device)
     labels = torch.as_tensor(np.where(pressed < 0, keys, pressed), device=device)
+    under_labels = torch.as_tensor(np.where(under < 0, keys, under), device=device)
     optimiser = adam(model.parameters(), config.learning_rate)
     steps = config.epochs * math.ceil(len(train) / config.batch_size)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, config.learning_rate, total_steps=steps)
@@ -196,8 +241,12 @@ def fit_touch_encoder(
     for _ in range(config.epochs):
         for batch in torch.randperm(len(train), generator=generator).split(config.batch_size):
             index = torch.as_tensor(train, device=device)[batch.to(device)]
-            pose, logits = model(images_t[index])
-            loss = F.smooth_l1_loss(pose, targets[index]) + F.cross_entropy(logits, labels[index])
+            pose, logits, under_logits = model.heads(images_t[index])
+            loss = (
+                F.smooth_l1_loss(pose, targets[index])
+                + F.cross_entropy(logits, labels[index])
+                + F.cross_entropy(under_logits, under_labels[index])
+            )
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
@@ -206,11 +255,14 @@ def fit_touch_encoder(
     metrics = {"touch/taps": float(len(taps))}
     if len(held):
         with torch.no_grad():
-            pose, logits = model(images_t[torch.as_tensor(held, device=device)])
+            pose, logits, under_logits = model.heads(images_t[torch.as_tensor(held, device=device)])
         error = (pose.cpu().numpy() - targets[held].cpu().numpy()) * scale
         metrics["touch/pose_error_mm"] = float(np.median(np.linalg.norm(error[:, :2], axis=-1)))
         metrics["touch/depth_error_mm"] = float(np.median(np.abs(error[:, 2])))
         metrics["touch/key_accuracy"] = float((logits.argmax(-1).cpu() == labels[held].cpu()).float().mean())
+        metrics["touch/under_accuracy"] = float(
+            (under_logits.argmax(-1).cpu() == under_labels[held].cpu()).float().mean()
+        )
     return model, metrics
 
 

@@ -33,6 +33,7 @@ from tactile_braille.agents.sac import SACAgent, SACConfig
 from tactile_braille.agents.sac_discrete import DiscreteSACAgent, DiscreteSACConfig
 from tactile_braille.agents.td3 import TD3Agent, TD3Config
 from tactile_braille.agents.touch import (
+    KeyLocator,
     LabelledTaps,
     TouchAgent,
     TouchEncoder,
@@ -303,6 +304,8 @@ def train(
     )
     # A touch-encoder run keeps its first steps' taps with their labels until the encoder is fitted.
     taps = LabelledTaps() if touch and not agent.fitted else None
+    braille = hasattr(env.unwrapped, "layout")  # goal-conditioned toys have no keyboard to locate keys on
+    locate = KeyLocator(env.unwrapped.layout, env.unwrapped.goal_keys) if touch and braille else None
     rng = np.random.default_rng(config.seed)
     start_epoch, env_steps, updates = 0, 0, 0
     if state is not None:
@@ -341,7 +344,7 @@ def train(
         bar = tqdm(total=config.epochs, initial=start_epoch, desc=run_dir.name, unit="epoch")
     observation, info = env.reset(seed=int(rng.integers(2**31)))
     if taps is not None:
-        taps.add_observation(observation, info)
+        taps.add_observation(observation, info, locate)
     buffer.start_episode(stored(observation))
     episode_return, recent_returns, losses = 0.0, [], {}
     burst = config.update_every * config.updates_per_step
@@ -355,7 +358,7 @@ def train(
                     action = agent.policy_action(observation, env_steps, explore=True, rng=rng)
                 observation, reward, terminated, truncated, info = env.step(action)
                 if taps is not None:
-                    taps.add_observation(observation, info)
+                    taps.add_observation(observation, info, locate)
                 buffer.add_step(action, reward, stored(observation), terminated)
                 episode_return += reward
                 env_steps += 1
@@ -365,7 +368,7 @@ def train(
                     episode_return = 0.0
                     observation, info = env.reset(seed=int(rng.integers(2**31)))
                     if taps is not None and env_steps < config.start_steps:
-                        taps.add_observation(observation, info)
+                        taps.add_observation(observation, info, locate)
                     buffer.start_episode(stored(observation))
                 if taps is not None and env_steps >= config.start_steps:
                     fit_touch()

@@ -70,6 +70,11 @@ class BrailleEnv(gym.Env):
         self._figure = None
 
     @property
+    def layout(self):
+        """The keyboard (:class:`~tactile_braille.keyboard.layout.KeyboardLayout`) in the sensor's frame."""
+        return self._core.layout
+
+    @property
     def goal_keys(self) -> tuple[str, ...]:
         """The task's keys, in the order of the goal one-hots."""
         return self._core.goal_keys
