@@ -111,3 +111,19 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     assert load_records(runs[:1])[0].typing["accuracy"] >= 0.0
     with pytest.raises(FileNotFoundError, match="not a training run"):
         load_records([tmp_path])
+    # A report written to a Markdown file (docs/results.md): figures beside it in a folder of its name,
+    # linked through it, the notes after the table and the command quoted.
+    page = write_report(runs, tmp_path / "docs" / "results.md", notes="Reading: **fine**.", command="make it")
+    text = page.read_text()
+    assert page == tmp_path / "docs" / "results.md"
+    assert (tmp_path / "docs" / "results" / "curves.png").read_bytes()[:4] == b"\x89PNG"
+    assert (
+        "](results/curves.png)" in text
+        and "](results/confusion_DiscreteArrows__dqn__custom_fp32.png)" in text
+    )
+    assert "`make it`" in text
+    assert (
+        text.index("| sim | disc arrow |")
+        < text.index("Reading: **fine**.")
+        < text.index("![training curves]")
+    )

@@ -1,19 +1,23 @@
-"""Relabelling when sampling, feature replay, the touch encoder and touch-encoder training runs.
+"""Relabelling when sampling, frame labels and the encoder's feature cache, the touch encoder and
+touch-encoder training runs.
 
 The replay tests build buffers by hand from episodes whose every transition
 carries a unique action id, so each sampled transition can be traced back to
-its episode. The training tests run tiny real trainings on the small test
-datasets (one torch thread, a few dozen steps, two passes of the encoder's fit).
+its episode, and whose frames (and labels) are kept as they were handed in.
+The training tests run tiny real trainings on the small test datasets (one
+torch thread, a few dozen steps, a few passes of the encoder's fit).
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import importlib
+import inspect
 import io
 import json
 import shutil
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -29,8 +33,10 @@ from tactile_braille.agents import (
     read_progress,
 )
 from tactile_braille.agents.common import observation_features
+from tactile_braille.agents.replay import FRAME_LABELS, PACKED_BYTES
 from tactile_braille.agents.report import evaluate_run, load_run
 from tactile_braille.agents.touch import (
+    KeyLocator,
     LabelledTaps,
     TouchAgent,
     TouchEncoder,
@@ -39,6 +45,7 @@ from tactile_braille.agents.touch import (
     fit_touch_encoder,
 )
 from tactile_braille.evaluation.protocol import evaluate_typing
+from tactile_braille.keyboard.layout import ALPHABET_KEYS, ARROW_KEYS, KeyboardLayout
 
 # ``tactile_braille.agents.train`` the function shadows the module of the same name: use the registry.
 train_module = importlib.import_module("tactile_braille.agents.train")
@@ -58,6 +65,7 @@ EPISODES = (  # (goal, steps, how it ends: a task key pressed, a press of a key 
     (2, 2, 2),  # right press
 )
 STEPS = sum(steps for _, steps, _ in EPISODES)
+FRAMES = STEPS + len(EPISODES)  # each episode's first observation and one per step
 WRONG_PRESS_STEPS = sum(steps for goal, steps, end in EPISODES if isinstance(end, int) and end != goal)
 
 
@@ -81,31 +89,59 @@ def replay_observation(observation: np.ndarray, goal: int, achieved: int | None 
 
 
 class Frames:
-    """Distinct observations in order: random binary images, or random feature vectors."""
+    """Distinct observations in order (random binary images, or random feature vectors), kept in ``given``."""
 
     def __init__(self, features: bool = False, seed: int = 0) -> None:
         self.features, self.rng = features, np.random.default_rng(seed)
+        self.given: list[np.ndarray] = []
 
     def __call__(self) -> np.ndarray:
         if self.features:
-            return self.rng.normal(size=FEATURES).astype(np.float32)
-        return ((self.rng.random((100, 100, 1)) < 0.3) * 255).astype(np.uint8)
+            frame = self.rng.normal(size=FEATURES).astype(np.float32)
+        else:
+            frame = ((self.rng.random((100, 100, 1)) < 0.3) * 255).astype(np.uint8)
+        self.given.append(frame)
+        return frame
+
+
+class Labels:
+    """Distinct frame labels in order, kept in ``given``; every ``unlabelled``-th frame has none."""
+
+    def __init__(self, unlabelled: int = 0) -> None:
+        self.unlabelled = unlabelled
+        self.given: list[np.ndarray | None] = []
+
+    def __call__(self) -> np.ndarray | None:
+        n = len(self.given)
+        if self.unlabelled and n % self.unlabelled == self.unlabelled - 1:
+            label = None
+        else:  # pose (n, -n/2, n/10) mm; keys cycle through -1..3, out of step with each other
+            label = LabelledTaps.label([n, -n / 2, n / 10], n % (GOALS + 1) - 1, (n + 2) % (GOALS + 1) - 1)
+        self.given.append(label)
+        return label
+
+    def table(self) -> np.ndarray:
+        """The labels given, NaN rows where none was (as the replay stores them)."""
+        unknown = np.full(FRAME_LABELS, np.nan, np.float32)
+        return np.stack([unknown if label is None else label for label in self.given])
 
 
 def fill(
-    buffer: EpisodeReplayBuffer, frames: Frames, episodes=EPISODES, first_id: int = 0
+    buffer: EpisodeReplayBuffer, frames: Frames, episodes=EPISODES, first_id: int = 0, labels=None
 ) -> dict[int, dict]:
-    """Record ``episodes``; returns, by action id, each transition's pressed key, final key and goal."""
+    """Record ``episodes`` (frames labelled by ``labels``, if given); returns, by action id, each
+    transition's pressed key, final key and goal."""
     table, action = {}, first_id
+    label = labels or (lambda: None)
     for goal, steps, end in episodes:
-        buffer.start_episode(replay_observation(frames(), goal))
+        buffer.start_episode(replay_observation(frames(), goal), label())
         final = end if isinstance(end, int) else -1
         for step in range(steps):
             last = step == steps - 1
             achieved = end if last and isinstance(end, int) else None
             terminated = last and end != TIMEOUT
             reward = float(achieved == goal)
-            buffer.add_step(action, reward, replay_observation(frames(), goal, achieved), terminated)
+            buffer.add_step(action, reward, replay_observation(frames(), goal, achieved), terminated, label())
             table[action] = {
                 "achieved": -1 if achieved is None else achieved, "final": final, "goal": goal,
                 "last": last, "terminal": terminated, "end": end,
@@ -123,6 +159,16 @@ def goal_indices(goals: np.ndarray) -> np.ndarray:
 
 def all_buffer(**kwargs) -> EpisodeReplayBuffer:
     return EpisodeReplayBuffer(100, GOALS, (), PREVIOUS, max_episode_steps=10, relabel="all", **kwargs)
+
+
+def as_images(frames: list[np.ndarray]) -> np.ndarray:
+    """(100, 100, 1) images as a (N, 1, 100, 100) batch."""
+    return np.moveaxis(np.stack(frames), -1, 1)
+
+
+def unpack(packed: np.ndarray) -> np.ndarray:
+    """Bit-packed frames of a replay file as (N, 1, 100, 100) uint8 images."""
+    return (np.unpackbits(packed, axis=-1).reshape(-1, 1, 100, 100) * 255).astype(np.uint8)
 
 
 # ---------------------------------------------------------------- relabel="all"
@@ -232,7 +278,7 @@ def test_feature_buffer_round_trips_exactly(tmp_path):
     restored = all_buffer(observation_shape=(FEATURES,))
     restored.load(tmp_path / "replay.npz")
     assert (restored.size, restored.next_slot) == (buffer.size, buffer.next_slot)
-    assert (restored.next_frame, restored.frames_written) == (STEPS + len(EPISODES),) * 2
+    assert (restored.next_frame, restored.frames_written) == (FRAMES, FRAMES)
     written = restored.frames_written
     np.testing.assert_array_equal(restored.frames[:written], buffer.frames[:written])
     for name in (
@@ -280,7 +326,7 @@ def test_a_file_without_pressed_keys_loads_them_as_unknown(tmp_path):
         np.testing.assert_array_equal(getattr(restored, name), getattr(buffer, name), err_msg=name)
 
 
-# ---------------------------------------------------------------- map_observations
+# ---------------------------------------------------------------- the encoder's feature cache
 PROJECTION = np.random.default_rng(7).normal(size=(100 * 100, FEATURES)).astype(np.float32)
 
 
@@ -288,69 +334,201 @@ def encode(images: np.ndarray) -> np.ndarray:
     """A fixed random projection of (B, 1, 100, 100) uint8 images (one row at a time: exact per image)."""
     assert images.dtype == np.uint8 and images.shape[1:] == (1, 100, 100)
     flat = images.reshape(len(images), -1).astype(np.float32) / 255.0
-    return np.stack([row @ PROJECTION for row in flat])
+    return np.stack([row @ PROJECTION for row in flat]).reshape(len(images), FEATURES)
 
 
-def as_batch(image: np.ndarray) -> np.ndarray:
-    """One (100, 100, 1) image as a (1, 1, 100, 100) batch."""
-    return np.moveaxis(image, -1, 0)[None]
+class ScaledEncoder:
+    """:func:`encode` times ``scale``, counting the images of each call; changing ``scale`` is a refit."""
+
+    def __init__(self, scale: float = 1.0) -> None:
+        self.scale, self.calls = scale, []
+
+    def __call__(self, images: np.ndarray) -> np.ndarray:
+        self.calls.append(len(images))
+        return self.scale * encode(images)
 
 
-def test_map_observations_encodes_every_frame_and_the_episode_in_progress():
+def test_set_encoder_caches_the_features_of_every_frame_and_the_episode_in_progress():
     buffer = all_buffer()
     frames = Frames()
     table = fill(buffer, frames)
-    start = frames()
-    buffer.start_episode(replay_observation(start, 1))
-    middle = frames()
-    buffer.add_step(50, 0.0, replay_observation(middle, 1), terminated=False)
+    buffer.start_episode(replay_observation(frames(), 1))
+    buffer.add_step(50, 0.0, replay_observation(frames(), 1), terminated=False)
+    start, middle = frames.given[-2:]
     original = copy.deepcopy(buffer)
-    calls = []
-
-    def counting(images):
-        calls.append(len(images))
-        return encode(images)
-
-    with pytest.raises(ValueError, match="vectors"):
-        buffer.map_observations(counting, (2, 3))
-    assert buffer.images and not calls  # refused before anything changed
-    buffer.map_observations(counting, (FEATURES,), batch_size=7)
-    assert sum(calls) == original.frames_written and max(calls) == 7
-    assert not buffer.images and buffer.frames.dtype == np.float32
+    encoder = ScaledEncoder()
+    buffer.set_encoder(encoder, FEATURES, batch_size=7)
+    assert sum(encoder.calls) == len(frames.given) == FRAMES + 2 and max(encoder.calls) == 7
+    np.testing.assert_allclose(buffer.features[: FRAMES + 2], encode(as_images(frames.given)), atol=1e-6)
+    # The buffer keeps its packed images; batches hold the features of the images they would have held.
+    assert buffer.images and buffer.frames.dtype == np.uint8
+    np.testing.assert_array_equal(buffer.frames, original.frames)
     ours, theirs = (
         buffer.sample(200, np.random.default_rng(4)),
         original.sample(200, np.random.default_rng(4)),
     )
-    np.testing.assert_allclose(ours["images"], encode(theirs["images"]), rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose(ours["next_images"], encode(theirs["next_images"]), rtol=1e-6, atol=1e-6)
-    for name in ("goals", "actions", "rewards", "dones", "previous_actions"):
+    assert ours["images"].shape == (200, FEATURES) and ours["images"].dtype == np.float32
+    np.testing.assert_allclose(ours["images"], encode(theirs["images"]), atol=1e-6)
+    np.testing.assert_allclose(ours["next_images"], encode(theirs["next_images"]), atol=1e-6)
+    for name in ("goals", "actions", "rewards", "dones", "previous_actions", "next_previous_actions"):
         np.testing.assert_array_equal(ours[name], theirs[name], err_msg=name)
-    with pytest.raises(ValueError, match="features already"):
-        buffer.map_observations(counting, (FEATURES,))
 
-    # The episode in progress goes on with features and ends in a press of key 1.
-    last = np.full(FEATURES, 9.0, dtype=np.float32)
+    # Frames stored from now on are encoded as they are stored: the episode in progress ends in a press.
+    encoder.calls.clear()
+    last = frames()
     buffer.add_step(51, 1.0, replay_observation(last, 1, achieved=1), terminated=True)
+    assert encoder.calls == [1]
     buffer.end_episode()
     assert buffer.size == STEPS + 2
     batch = buffer.sample(2000, np.random.default_rng(5))
     assert set(batch["actions"].tolist()) == {*table, 50, 51}
     first = batch["actions"] == 50
     second = batch["actions"] == 51
-    for rows, name, expected in (
-        (first, "images", encode(as_batch(start))),
-        (first, "next_images", encode(as_batch(middle))),
-        (second, "images", encode(as_batch(middle))),
-        (second, "next_images", last[None]),
+    for rows, name, image in (
+        (first, "images", start),
+        (first, "next_images", middle),
+        (second, "images", middle),
+        (second, "next_images", last),
     ):
         assert rows.any()
-        np.testing.assert_allclose(
-            batch[name][rows], np.repeat(expected, rows.sum(), 0), rtol=1e-6, atol=1e-6
-        )
+        expected = encode(as_images([image]))
+        np.testing.assert_allclose(batch[name][rows], np.repeat(expected, rows.sum(), 0), atol=1e-6)
     goals = goal_indices(batch["goals"])
     np.testing.assert_array_equal(batch["rewards"][second], (goals[second] == 1).astype(np.float32))
     assert (batch["rewards"][first] == 0).all()
-    assert buffer.finals[buffer.size - 1] == buffer.finals[buffer.size - 2] == 1
+
+
+def test_set_encoder_again_recomputes_the_cache_after_a_refit():
+    buffer = all_buffer()
+    frames = Frames()
+    fill(buffer, frames)
+    encoder = ScaledEncoder()
+    buffer.set_encoder(encoder, FEATURES)
+    encoder.scale = 3.0  # refitted in place, as the training loop refits the agent's encoder
+    np.testing.assert_allclose(buffer.features[:FRAMES], encode(as_images(frames.given)), atol=1e-6)
+    buffer.set_encoder(encoder, FEATURES)
+    np.testing.assert_allclose(buffer.features[:FRAMES], 3.0 * encode(as_images(frames.given)), atol=1e-5)
+    buffer.start_episode(replay_observation(frames(), 0))  # a frame stored after the refit
+    np.testing.assert_allclose(
+        buffer.features[FRAMES], 3.0 * encode(as_images(frames.given[-1:]))[0], atol=1e-5
+    )
+
+    # Another encoder, of another size, takes over.
+    def wider(images):
+        return np.concatenate([encode(images), np.ones((len(images), 1), np.float32)], axis=1)
+
+    buffer.set_encoder(wider, FEATURES + 1)
+    assert buffer.sample(10, np.random.default_rng(6))["images"].shape == (10, FEATURES + 1)
+    np.testing.assert_allclose(buffer.features[: FRAMES + 1], wider(as_images(frames.given)), atol=1e-6)
+
+
+def test_set_encoder_and_labelled_frames_are_refused_for_a_buffer_of_features():
+    buffer = all_buffer(observation_shape=(FEATURES,))
+    frames = Frames(features=True)
+    fill(buffer, frames)
+    encoder = ScaledEncoder()
+    with pytest.raises(ValueError, match="buffer of images"):
+        buffer.set_encoder(encoder, FEATURES)
+    assert buffer.features is None and not encoder.calls
+    buffer.start_episode(replay_observation(frames(), 0))  # stored as given, not through the encoder
+    assert not encoder.calls
+    np.testing.assert_array_equal(buffer.frames[FRAMES], frames.given[-1])
+    with pytest.raises(ValueError, match="features, not images"):
+        buffer.labelled_frames()
+
+
+def test_the_cache_is_not_saved_and_is_recomputed_on_load(tmp_path):
+    buffer = all_buffer()
+    frames = Frames()
+    fill(buffer, frames)
+    buffer.set_encoder(encode, FEATURES)
+    buffer.save(tmp_path / "replay.npz")
+    with np.load(tmp_path / "replay.npz") as data:
+        assert "frame_labels" in data.files and not any("feature" in name for name in data.files)
+        assert data["frames"].dtype == np.uint8 and data["frames"].shape == (FRAMES, PACKED_BYTES)
+
+    restored = all_buffer()
+    fill(restored, Frames(seed=1), EPISODES * 2)  # other images, to be replaced
+    encoder = ScaledEncoder(scale=2.0)
+    restored.set_encoder(encoder, FEATURES)
+    restored.load(tmp_path / "replay.npz")
+    np.testing.assert_allclose(restored.features[:FRAMES], 2.0 * encode(as_images(frames.given)), atol=1e-5)
+    ours, theirs = (
+        buffer.sample(64, np.random.default_rng(3)),
+        restored.sample(64, np.random.default_rng(3)),
+    )
+    np.testing.assert_allclose(theirs["next_images"], 2.0 * ours["next_images"], atol=1e-5)
+    # Without an encoder a loaded buffer samples images.
+    plain = all_buffer()
+    plain.load(tmp_path / "replay.npz")
+    assert plain.features is None
+    batch = plain.sample(64, np.random.default_rng(3))
+    assert batch["images"].shape == (64, 1, 100, 100) and batch["images"].dtype == np.uint8
+    np.testing.assert_allclose(ours["images"], encode(batch["images"]), atol=1e-6)
+
+
+# ---------------------------------------------------------------- frame labels
+def test_frame_labels_are_stored_saved_and_loaded(tmp_path):
+    buffer = all_buffer()
+    labels = Labels(unlabelled=4)
+    fill(buffer, Frames(), labels=labels)
+    expected = labels.table()
+    assert np.isnan(expected).any() and not np.isnan(expected).all()
+    np.testing.assert_array_equal(buffer.frame_labels[:FRAMES], expected)  # NaN where none was given
+    assert np.isnan(buffer.frame_labels[FRAMES:]).all()
+    buffer.start_episode(replay_observation(Frames(seed=2)(), 1), labels())  # in progress: not saved
+    assert not np.isnan(buffer.frame_labels[FRAMES]).any()
+    buffer.save(tmp_path / "replay.npz")
+
+    restored = all_buffer()
+    fill(restored, Frames(seed=1), EPISODES * 2, labels=Labels())  # more labelled frames, to be replaced
+    restored.load(tmp_path / "replay.npz")
+    assert restored.frame_labels.dtype == np.float32 and restored.frame_labels.shape[1] == FRAME_LABELS
+    np.testing.assert_array_equal(restored.frame_labels[:FRAMES], expected)
+    assert np.isnan(restored.frame_labels[FRAMES:]).all()
+    np.testing.assert_array_equal(restored.labelled_frames()[1], buffer.labelled_frames()[1][:-1])
+
+
+def test_a_file_without_frame_labels_loads_them_as_unknown(tmp_path):
+    buffer = all_buffer()
+    frames = Frames()
+    fill(buffer, frames, labels=Labels())
+    buffer.save(tmp_path / "new.npz")
+    with np.load(tmp_path / "new.npz") as data:
+        old = {name: data[name] for name in data if name != "frame_labels"}
+    np.savez(tmp_path / "old.npz", **old)  # as buffers wrote before frames had labels
+    restored = all_buffer()
+    fill(restored, Frames(seed=1), labels=Labels())  # labels to be forgotten
+    restored.load(tmp_path / "old.npz")
+    assert np.isnan(restored.frame_labels).all()
+    images, poses, pressed, under = restored.labelled_frames()
+    assert images.shape == (0, 1, 100, 100) and poses.shape == (0, 3) and len(pressed) == len(under) == 0
+    np.testing.assert_array_equal(restored.frames[:FRAMES], buffer.frames[:FRAMES])
+    np.testing.assert_array_equal(restored.frame_index, buffer.frame_index)
+
+
+def test_labelled_frames_hold_the_labelled_frames_and_the_episode_in_progress():
+    buffer = all_buffer()
+    frames, labels = Frames(), Labels(unlabelled=3)
+    fill(buffer, frames, labels=labels)
+    buffer.start_episode(replay_observation(frames(), 1), labels())
+    buffer.add_step(50, 0.0, replay_observation(frames(), 1), False, labels())
+    kept = [i for i, label in enumerate(labels.given) if label is not None]
+    assert len(kept) < len(labels.given) and {FRAMES, FRAMES + 1} <= set(kept)  # in progress: labelled
+    images, poses, pressed, under = buffer.labelled_frames()
+    assert images.dtype == np.uint8 and poses.dtype == np.float32
+    assert pressed.dtype == under.dtype == np.int64
+    np.testing.assert_array_equal(images, as_images([frames.given[i] for i in kept]))
+    expected = labels.table()[kept]
+    np.testing.assert_array_equal(poses, expected[:, :3])
+    np.testing.assert_array_equal(pressed, expected[:, 3])
+    np.testing.assert_array_equal(under, expected[:, 4])
+    assert {-1, 3} <= set(pressed.tolist()) and {-1, 3} <= set(under.tolist())
+    # As labelled taps, for the touch encoder's fit.
+    taps = LabelledTaps.from_arrays(images, poses, pressed, under)
+    for ours, theirs in zip(taps.arrays(), (images, poses, pressed), strict=True):
+        np.testing.assert_array_equal(ours, theirs)
+    assert taps.under == under.tolist()
 
 
 # ---------------------------------------------------------------- touch encoder
@@ -385,44 +563,56 @@ def test_touch_encoder_shapes_and_image_layouts():
     assert pose.shape == (4, 3) and logits.shape == (4, 3 + 1)  # the last class: no task key
 
 
-def test_labelled_taps_from_observations_and_through_a_file(tmp_path):
+def test_labelled_taps_from_observations_and_arrays():
     taps = LabelledTaps()
     images = Frames()
     given = [images() for _ in range(5)]
+
+    def locate(pose_mm):  # stands in for a KeyLocator: key (x mod 4)
+        return int(pose_mm[0]) % GOALS
+
     for image, achieved in zip(given, (None, 2, None, 0), strict=False):
         pose = np.array([1.0, -2.0, 3.0]) * (len(taps) + 1)
-        taps.add_observation(replay_observation(image, 1, achieved), {"sensor_pose_mm": pose})
+        taps.add_observation(
+            replay_observation(image, 1, achieved),
+            {"sensor_pose_mm": pose},
+            locate if len(taps) % 2 else None,
+        )
     taps.add(given[4][:, :, 0], np.array([9.0, 8.0, 7.0, 6.0]), pressed=3)  # a 2-D image, extra pose entries
     assert len(taps) == 5
     stacked, poses, pressed = taps.arrays()
     assert stacked.shape == (5, 1, 100, 100) and stacked.dtype == np.uint8
-    np.testing.assert_array_equal(stacked, np.moveaxis(np.stack(given), -1, 1))
+    np.testing.assert_array_equal(stacked, as_images(given))
     assert poses.shape == (5, 3) and poses.dtype == np.float32
     np.testing.assert_array_equal(poses[:4], np.array([1.0, -2.0, 3.0]) * np.arange(1, 5)[:, None])
     np.testing.assert_array_equal(poses[4], [9.0, 8.0, 7.0])
     assert pressed.tolist() == [-1, 2, -1, 0, 3] and pressed.dtype == np.int64
-    taps.save(tmp_path / "taps.npz")
-    again = LabelledTaps()
-    again.add(images(), np.zeros(3), 1)  # replaced by the file's taps
-    again.load(tmp_path / "taps.npz")
+    assert taps.under == [-1, 2, -1, 0, -1]  # located at x = 2 and 4 mm; none without a locator
+    again = LabelledTaps.from_arrays(stacked, poses, pressed, np.array(taps.under))
     for ours, theirs in zip(taps.arrays(), again.arrays(), strict=True):
         np.testing.assert_array_equal(ours, theirs)
         assert ours.dtype == theirs.dtype
-    empty = LabelledTaps()
-    empty.save(tmp_path / "empty.npz")
-    again.load(tmp_path / "empty.npz")
-    assert len(again) == 0
+    assert again.under == taps.under
+    assert len(LabelledTaps.from_arrays(stacked[:0], poses[:0], pressed[:0], pressed[:0])) == 0
 
 
-def test_labelled_taps_refuse_a_file_whose_arrays_differ_in_number(tmp_path):
-    np.savez(
-        tmp_path / "bad.npz",
-        images=np.zeros((3, 1, 100, 100), np.uint8),
-        poses=np.zeros((2, 3), np.float32),
-        pressed=np.zeros(3, np.int64),
-    )
+@pytest.mark.parametrize("short", ["images", "poses", "pressed", "under"])
+def test_labelled_taps_refuse_arrays_that_differ_in_number(short):
+    arrays = {
+        "images": np.zeros((3, 1, 100, 100), np.uint8),
+        "poses": np.zeros((3, 3), np.float32),
+        "pressed": np.zeros(3, np.int64),
+        "under": np.zeros(3, np.int64),
+    }
+    arrays[short] = arrays[short][:2]
     with pytest.raises(ValueError, match="differ in number"):
-        LabelledTaps().load(tmp_path / "bad.npz")
+        LabelledTaps.from_arrays(**arrays)
+
+
+def test_a_label_is_the_pose_the_pressed_key_and_the_key_under_the_sensor():
+    label = LabelledTaps.label(np.array([1.5, -2.0, 3.25, 99.0]), pressed=2, under=-1)
+    assert label.shape == (FRAME_LABELS,) and label.dtype == np.float32
+    np.testing.assert_array_equal(label, [1.5, -2.0, 3.25, 2.0, -1.0])
 
 
 SYNTHETIC_KEYS = 3
@@ -490,6 +680,74 @@ def test_fit_touch_encoder_keeps_a_tap_to_train_on_whatever_the_validation_share
     model, metrics = fit_touch_encoder(synthetic_taps(10, 0), SYNTHETIC_KEYS, config)
     assert np.isfinite(model.pose_mean.numpy()).all()
     assert np.isfinite(metrics["touch/pose_error_mm"])
+
+
+def test_a_refit_starts_from_the_given_encoders_weights():
+    config = TouchEncoderConfig(features=4, hidden=8, epochs=1)
+    torch.manual_seed(0)
+    first, _ = fit_touch_encoder(synthetic_taps(20, 0), SYNTHETIC_KEYS, config)
+    weights = copy.deepcopy(first.state_dict())
+    # So small a step that a refit barely moves: its weights are those it started from.
+    still = dataclasses.replace(config, learning_rate=1e-9)
+    refit, metrics = fit_touch_encoder(synthetic_taps(30, 1), SYNTHETIC_KEYS, still, seed=1, init=first)
+    fresh, _ = fit_touch_encoder(synthetic_taps(30, 1), SYNTHETIC_KEYS, still, seed=1)
+    parameters = dict(first.named_parameters())
+    assert refit is not first and metrics["touch/taps"] == 30
+    for name, parameter in refit.named_parameters():
+        torch.testing.assert_close(parameter, parameters[name], rtol=0, atol=1e-6, msg=name)
+    assert not all(torch.allclose(p, parameters[name], atol=1e-3) for name, p in fresh.named_parameters())
+    # The pose statistics are the new taps'; the encoder it started from is left as it was, frozen.
+    assert not torch.equal(refit.pose_mean, first.pose_mean)
+    assert all(torch.equal(first.state_dict()[name], value) for name, value in weights.items())
+    assert not any(p.requires_grad for p in first.parameters())
+    assert not refit.training and not any(p.requires_grad for p in refit.parameters())
+
+
+# ---------------------------------------------------------------- the key under the sensor
+def test_a_key_locator_maps_each_keys_centre_to_it():
+    layout = KeyboardLayout()
+    for keys in (ARROW_KEYS, ALPHABET_KEYS):
+        locate = KeyLocator(layout, keys)
+        assert [locate((*layout.centre_mm(key), 2.0)) for key in keys] == list(range(len(keys)))
+
+
+@pytest.mark.parametrize("pitch_mm", [18.0, 19.0, 20.0])
+@pytest.mark.parametrize(
+    ("near", "far"), [("LEFT", "DOWN"), ("DOWN", "LEFT"), ("UP", "DOWN"), ("DOWN", "UP")]
+)
+def test_a_point_between_two_keys_belongs_to_the_key_whose_cell_holds_it(pitch_mm, near, far):
+    layout = KeyboardLayout(pitch_mm=pitch_mm)
+    locate = KeyLocator(layout, ARROW_KEYS)
+    a, b = np.array(layout.centre_mm(near)), np.array(layout.centre_mm(far))
+    assert np.linalg.norm(b - a) == pytest.approx(pitch_mm)  # neighbours, in a row or across rows
+    towards = (b - a) / pitch_mm
+    edge = a + towards * pitch_mm / 2  # where the two keys' cells meet
+    assert locate(edge - 0.1 * towards) == ARROW_KEYS.index(near)
+    assert locate(edge + 0.1 * towards) == ARROW_KEYS.index(far)
+
+
+def test_a_key_locator_finds_no_task_key_off_them():
+    layout = KeyboardLayout()
+    locate = KeyLocator(layout, ARROW_KEYS)
+    for point in ((500.0, 500.0), (-100.0, 0.0), layout.centre_mm("END"), layout.centre_mm("Q")):
+        assert locate(point) == -1, point
+    up = np.array(layout.centre_mm("UP"))
+    assert locate(up + np.array([-9.6, 0.0])) == -1  # ENTER, in the row above UP
+    assert locate(up + np.array([0.0, 9.6])) == -1  # RIGHTSHIFT's cell
+
+
+def test_space_has_a_cell_as_wide_as_its_bar():
+    layout = KeyboardLayout()
+    locate = KeyLocator(layout, ALPHABET_KEYS)
+    space = ALPHABET_KEYS.index("SPACE")
+    x, y = layout.centre_mm("SPACE")
+    half_mm = 6.25 * 19.0 / 2  # 59.375 mm either side of its centre, as far as LEFTALT and RIGHTALT
+    for along in (0.0, 40.0, half_mm - 0.5, -(half_mm - 0.5)):
+        assert locate((x, y + along)) == space, along
+        assert locate((x - 9.0, y + along)) == space, along  # just below the Z row
+    assert locate((x, y + half_mm + 0.5)) == -1  # LEFTALT, not a task key
+    assert locate((x, y - half_mm - 0.5)) == -1  # RIGHTALT
+    assert locate((x - 10.0, y)) == ALPHABET_KEYS.index("B")  # the key above its centre
 
 
 # ---------------------------------------------------------------- touch agent
@@ -567,30 +825,57 @@ def test_touch_agent_policy_snapshot_holds_the_encoder(discrete_env):
 
 # ---------------------------------------------------------------- training with a touch encoder
 class FrameRecordingBuffer(EpisodeReplayBuffer):
-    """The replay buffer, keeping what was handed in for each frame slot (an image or features)."""
+    """The replay buffer, keeping what was handed in for each frame slot: the image and its labels."""
 
     made: ClassVar[list[FrameRecordingBuffer]] = []
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
-        self.handed: dict[int, np.ndarray] = {}
+        self.handed: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
         FrameRecordingBuffer.made.append(self)
 
-    def _store_frame(self, image: np.ndarray) -> int:
-        slot = super()._store_frame(image)
-        self.handed[slot] = np.array(image, copy=True)
+    def _store_frame(self, image: np.ndarray, label: np.ndarray | None = None) -> int:
+        slot = super()._store_frame(image, label)
+        self.handed[slot] = (
+            np.array(image, copy=True),
+            None if label is None else np.array(label, copy=True),
+        )
         return slot
+
+    def handed_images(self, slots) -> np.ndarray:
+        """The images handed in for ``slots``, as the buffer keeps them (binary, (N, 1, 100, 100))."""
+        return ((as_images([self.handed[slot][0] for slot in slots]) > 127) * 255).astype(np.uint8)
+
+    def handed_labels(self, slots) -> np.ndarray:
+        return np.stack([self.handed[slot][1] for slot in slots])
+
+
+class Fit(NamedTuple):
+    taps: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # images, poses, pressed, under
+    epochs: int
+    init: dict | None  # the weights the fit started from
+    result: dict  # the fitted weights
 
 
 class RecordingFit:
-    """``fit_touch_encoder``, noting the labelled taps of each call."""
+    """``fit_touch_encoder``, noting the labelled taps, the epochs and the weights of each call."""
 
     def __init__(self) -> None:
-        self.calls: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.calls: list[Fit] = []
 
-    def __call__(self, taps, *args, **kwargs):
-        self.calls.append(taps.arrays())
-        return fit_touch_encoder(taps, *args, **kwargs)
+    def __call__(self, *args, **kwargs):
+        arguments = inspect.signature(fit_touch_encoder).bind(*args, **kwargs).arguments
+        taps, init = arguments["taps"], arguments.get("init")
+        model, metrics = fit_touch_encoder(*args, **kwargs)
+        self.calls.append(
+            Fit(
+                (*taps.arrays(), np.array(taps.under, dtype=np.int64)),
+                arguments["config"].epochs,
+                None if init is None else copy.deepcopy(init.state_dict()),
+                copy.deepcopy(model.state_dict()),
+            )
+        )
+        return model, metrics
 
 
 def touch_config(env_datasets, algo: str = "dqn", **changes) -> TrainConfig:
@@ -604,7 +889,7 @@ def touch_config(env_datasets, algo: str = "dqn", **changes) -> TrainConfig:
 
 
 def recorded_train(config, run_dir, resume: bool = False):
-    """Train (or resume) with the replay buffer and the encoder's fit recorded."""
+    """Train (or resume) with the replay buffer and the encoder's fits recorded."""
     FrameRecordingBuffer.made = []
     fit = RecordingFit()
     with pytest.MonkeyPatch.context() as patch:
@@ -625,10 +910,38 @@ def saved_encoder(run) -> TouchEncoder:
     return encoder.eval()
 
 
-def replay_frames(run) -> np.ndarray:
+def saved_replay(run) -> tuple[np.ndarray, np.ndarray]:
+    """The packed frames and the frame labels of the run's replay file (checked to hold nothing else)."""
     (replay,) = run.glob("replay.*.npz")
     with np.load(replay) as data:
-        return data["frames"]
+        assert not any("feature" in name for name in data.files)
+        return data["frames"], data["frame_labels"]
+
+
+def fits(run) -> list[dict]:
+    return json.loads((run / "touch.json").read_text())["fits"]
+
+
+def written_slots(buffer: EpisodeReplayBuffer) -> range:
+    return range(min(buffer.frames_written, buffer.frame_capacity))
+
+
+def assert_replay_features_are_the_encoders(
+    buffer: FrameRecordingBuffer, encoder: TouchEncoder, loaded: np.ndarray | None = None
+) -> None:
+    """The feature cache, and the batches sampled, are ``encoder``'s features of the stored images
+    (``loaded``: the images of the frames a resumed run loaded, stored before the others)."""
+    loaded = np.zeros((0, 1, 100, 100), np.uint8) if loaded is None else loaded
+    slots = written_slots(buffer)
+    images = np.concatenate([loaded, buffer.handed_images(slots[len(loaded) :])])
+    np.testing.assert_array_equal(unpack(buffer.frames[np.array(slots)]), images)
+    np.testing.assert_allclose(buffer.features[: len(slots)], encoder.encode(images), rtol=1e-4, atol=1e-5)
+    plain = copy.copy(buffer)
+    plain.features = None  # the same buffer sampling images
+    ours, theirs = buffer.sample(16, np.random.default_rng(0)), plain.sample(16, np.random.default_rng(0))
+    assert ours["images"].shape == (16, TouchEncoderConfig().features)
+    for name in ("images", "next_images"):
+        np.testing.assert_allclose(ours[name], encoder.encode(theirs[name]), rtol=1e-4, atol=1e-5)
 
 
 @pytest.fixture(scope="module")
@@ -652,102 +965,161 @@ def test_make_agent_builds_a_touch_agent_on_features(env_datasets, discrete_env)
 
 
 @pytest.mark.parametrize("algo", ["dqn", "sac"])
-def test_a_touch_run_fits_the_encoder_at_the_start_steps_and_replays_features(touch_runs, algo):
+def test_a_touch_run_labels_its_frames_fits_at_the_start_steps_and_replays_features(
+    touch_runs, discrete_env, algo
+):
     run, buffer, fit = touch_runs[algo]
-    summary = json.loads((run / "touch.json").read_text())
+    (summary,) = fits(run)
     assert set(summary) == {
         "touch/taps", "touch/pose_error_mm", "touch/depth_error_mm", "touch/key_accuracy",
         "touch/under_accuracy", "env_steps",
     }  # fmt: skip
-    assert summary["env_steps"] == 12
-    (taps,) = fit.calls
+    assert summary["env_steps"] == 12 and all(np.isfinite(value) for value in summary.values())
+    (call,) = fit.calls
+    assert call.init is None and call.epochs == 2  # a first fit: fresh weights, touch_epochs passes
     # The first observation and the 12 start steps' observations, plus the first observation of each
-    # episode begun within them.
-    assert summary["touch/taps"] == len(taps[0]) and 13 <= len(taps[0]) <= 24
-    assert all(np.isfinite(value) for value in summary.values())
+    # episode begun within them: the frames stored so far, in order, with their labels.
+    images, poses, pressed, under = call.taps
+    assert summary["touch/taps"] == len(images) and 13 <= len(images) <= 24
+    taps = range(len(images))
+    np.testing.assert_array_equal(images, buffer.handed_images(taps))
+    labels = buffer.handed_labels(taps)
+    np.testing.assert_array_equal(poses, labels[:, :3])
+    np.testing.assert_array_equal(pressed, labels[:, 3])
+    np.testing.assert_array_equal(under, labels[:, 4])
     state = checkpoint(run)
-    assert state["agent"]["touch_fitted"] is True and state["taps"] is None
+    assert state["agent"]["touch_fitted"] is True and "taps" not in state
     assert not list(run.glob("taps.*.npz"))
     (row,) = read_progress(run)
     assert row["env_steps"] == 20 and row["updates"] > 0  # the learner trained on features
     snapshot = torch.load(next((run / "snapshots").iterdir()), weights_only=False)
     assert torch.equal(snapshot["touch"]["pose.weight"], state["agent"]["touch"]["pose.weight"])
 
-    frames = replay_frames(run)
-    assert frames.dtype == np.float32 and frames.shape[1] == TouchEncoderConfig().features
-    # Every frame is the fitted encoder's features of its image: images stored before the fit were mapped,
-    # observations after it were stored as features.
-    encoder = saved_encoder(run)
-    written = min(buffer.frames_written, buffer.frame_capacity)
-    assert set(buffer.handed) == set(range(written))
-    kinds = {buffer.handed[slot].ndim for slot in range(written)}
-    assert kinds == {1, 3}  # both before and after the fit
-    for slot in range(written):
-        handed = buffer.handed[slot]
-        expected = encoder.encode(handed[None])[0] if handed.ndim == 3 else handed
-        np.testing.assert_allclose(buffer.frames[slot], expected, rtol=1e-5, atol=1e-5, err_msg=str(slot))
-    np.testing.assert_array_equal(frames, buffer.frames[: len(frames)])
+    # Every frame came with its labels; the replay file holds the packed images and the labels.
+    slots = written_slots(buffer)
+    assert set(buffer.handed) == set(slots)
+    assert all(label is not None and label.shape == (FRAME_LABELS,) for _, label in buffer.handed.values())
+    frames, saved_labels = saved_replay(run)
+    assert frames.dtype == np.uint8 and frames.shape[1] == PACKED_BYTES and len(frames) > len(images)
+    np.testing.assert_array_equal(unpack(frames), buffer.handed_images(range(len(frames))))
+    np.testing.assert_array_equal(saved_labels, buffer.handed_labels(range(len(frames))))
+    # A frame's pressed key is the key its transition pressed; the key under the sensor is the task key
+    # whose centre it is over (the discrete task taps key centres, or places outside the task's keys).
+    size = buffer.size
+    np.testing.assert_array_equal(
+        buffer.frame_labels[buffer.frame_index[:size, 1], 3], buffer.achieved[:size]
+    )
+    all_labels = buffer.handed_labels(slots)
+    assert (all_labels[:, 3] >= 0).any(), "no key was pressed: the pressed-key labels were not checked"
+    if algo == "dqn":
+        layout, keys = discrete_env.unwrapped.layout, discrete_env.unwrapped.goal_keys
+        centres = {layout.centre_mm(key): index for index, key in enumerate(keys)}
+        expected = [centres.get((float(x), float(y)), -1) for x, y in all_labels[:, :2]]
+        assert all_labels[:, 4].tolist() == expected and set(expected) > {-1}
+    else:
+        locate = KeyLocator(KeyboardLayout(), ARROW_KEYS)
+        assert all_labels[:, 4].tolist() == [locate(pose) for pose in all_labels[:, :3]]
+
+    # Batches hold the saved encoder's features of the stored images.
+    assert buffer.images
+    assert_replay_features_are_the_encoders(buffer, saved_encoder(run))
 
 
-def test_a_run_resumed_before_the_fit_keeps_its_taps_and_fits_at_the_start_steps(env_datasets, tmp_path):
+def test_a_run_resumed_before_the_fit_keeps_its_labelled_frames_and_fits_at_the_start_steps(
+    env_datasets, tmp_path
+):
     run = tmp_path / "early"
     config = touch_config(env_datasets, start_steps=30)
-    _, fit = recorded_train(config, run)
+    first, fit = recorded_train(config, run)
     assert not fit.calls and not (run / "touch.json").exists()
     state = checkpoint(run)
-    assert state["taps"] == "taps.0.npz" and state["agent"]["touch_fitted"] is False
+    assert state["agent"]["touch_fitted"] is False and "taps" not in state
     assert read_progress(run)[0]["updates"] == 0
-    saved = LabelledTaps()
-    saved.load(run / "taps.0.npz")
-    assert len(saved) >= 21  # the first observation and 20 steps' observations at least
-    old_frames = replay_frames(run)
-    assert old_frames.dtype == np.uint8  # images, bit-packed
+    old_frames, old_labels = saved_replay(run)
+    saved = len(old_frames)
+    assert saved >= 21 and len(old_labels) == saved  # the first observation and 20 steps' observations
+    np.testing.assert_array_equal(old_labels, first.handed_labels(range(saved)))
 
     data = json.loads((run / "config.json").read_text())
     data["epochs"] = 2
     (run / "config.json").write_text(json.dumps(data))
     buffer, fit = recorded_train(None, run, resume=True)
-    (taps,) = fit.calls
-    for ours, theirs in zip(saved.arrays(), taps, strict=True):  # the saved taps come first
-        np.testing.assert_array_equal(theirs[: len(saved)], ours)
-    assert len(saved) + 11 <= len(taps[0]) <= len(saved) + 21  # a new first observation and 10 steps more
-    summary = json.loads((run / "touch.json").read_text())
-    assert summary["env_steps"] == 30 and summary["touch/taps"] == len(taps[0])
+    (call,) = fit.calls
+    images, poses, pressed, under = call.taps
+    # The frames of the first epoch come first, with the labels they were saved with.
+    np.testing.assert_array_equal(images[:saved], unpack(old_frames))
+    np.testing.assert_array_equal(poses[:saved], old_labels[:, :3])
+    np.testing.assert_array_equal(pressed[:saved], old_labels[:, 3])
+    np.testing.assert_array_equal(under[:saved], old_labels[:, 4])
+    assert saved + 11 <= len(images) <= saved + 21  # a new first observation and 10 steps more
+    (summary,) = fits(run)
+    assert summary["env_steps"] == 30 and summary["touch/taps"] == len(images)
     state = checkpoint(run)
-    assert state["taps"] is None and state["agent"]["touch_fitted"] is True
-    assert not list(run.glob("taps.*.npz"))
+    assert state["agent"]["touch_fitted"] is True and "taps" not in state
     rows = read_progress(run)
     assert [row["env_steps"] for row in rows] == [20, 40] and rows[-1]["updates"] > 0
-    # The images of the first epoch were mapped to the fitted encoder's features.
-    frames = replay_frames(run)
-    assert frames.dtype == np.float32
-    images = (np.unpackbits(old_frames, axis=-1).reshape(-1, 1, 100, 100) * 255).astype(np.uint8)
-    np.testing.assert_allclose(frames[: len(old_frames)], saved_encoder(run).encode(images), atol=1e-5)
-    assert not buffer.images
+    frames, labels = saved_replay(run)
+    assert frames.dtype == np.uint8 and len(frames) > saved
+    np.testing.assert_array_equal(frames[:saved], old_frames)
+    np.testing.assert_array_equal(labels[:saved], old_labels)
+    # The loaded frames were encoded too, by the fitted encoder.
+    assert set(buffer.handed) == set(written_slots(buffer)[saved:])
+    assert_replay_features_are_the_encoders(buffer, saved_encoder(run), loaded=unpack(old_frames))
 
 
-def test_a_run_resumed_after_the_fit_reloads_the_encoder_and_the_feature_replay(touch_runs, tmp_path):
+def test_a_run_resumed_after_the_fit_reencodes_its_replay_with_the_loaded_encoder(touch_runs, tmp_path):
     original, _, _ = touch_runs["dqn"]
     run = tmp_path / "late"
     shutil.copytree(original, run)
     fitted = saved_encoder(run)
-    old_frames = replay_frames(run)
+    old_frames, old_labels = saved_replay(run)
     summary = (run / "touch.json").read_text()
     data = json.loads((run / "config.json").read_text())
     data["epochs"] = 2
     (run / "config.json").write_text(json.dumps(data))
     buffer, fit = recorded_train(None, run, resume=True)
     assert not fit.calls  # not fitted again
-    assert not buffer.images  # the replay holds features from the start
-    assert all(handed.ndim == 1 for handed in buffer.handed.values())
     assert same_weights(saved_encoder(run), fitted)
     assert checkpoint(run)["agent"]["touch_fitted"] is True
     assert (run / "touch.json").read_text() == summary
-    frames = replay_frames(run)
-    assert frames.dtype == np.float32 and len(frames) > len(old_frames)
+    # The loaded images' features were recomputed with the loaded encoder, the new ones encoded as stored.
+    assert set(buffer.handed) == set(written_slots(buffer)[len(old_frames) :])
+    assert_replay_features_are_the_encoders(buffer, fitted, loaded=unpack(old_frames))
+    frames, labels = saved_replay(run)
+    assert frames.dtype == np.uint8 and len(frames) > len(old_frames)
     np.testing.assert_array_equal(frames[: len(old_frames)], old_frames)
+    np.testing.assert_array_equal(labels[: len(old_frames)], old_labels)
+    assert not np.isnan(labels).any()
     rows = read_progress(run)
     assert [row["env_steps"] for row in rows] == [20, 40] and rows[1]["updates"] > rows[0]["updates"]
+
+
+def test_touch_fit_steps_double_from_the_start_steps(env_datasets):
+    assert train_module.touch_fit_steps(touch_config(env_datasets)) == (12,)
+    assert train_module.touch_fit_steps(touch_config(env_datasets, touch_refits=3)) == (12, 24, 48, 96)
+
+
+def test_a_refit_starts_from_the_current_encoder_on_every_labelled_frame_so_far(env_datasets, tmp_path):
+    run = tmp_path / "refit"
+    config = touch_config(env_datasets, steps_per_epoch=26, touch_refits=1, touch_epochs=8)
+    buffer, fit = recorded_train(config, run)
+    first, second = fit.calls
+    assert first.init is None and first.epochs == 8
+    taps, more = len(first.taps[0]), len(second.taps[0])
+    assert more >= taps + 12
+    for ours, theirs in zip(first.taps, second.taps, strict=True):  # the first fit's taps, then newer ones
+        np.testing.assert_array_equal(theirs[:taps], ours)
+    np.testing.assert_array_equal(second.taps[0], buffer.handed_images(range(more)))
+    # From the first fit's weights, with as many gradient steps as it (epochs scaled by the taps).
+    assert second.init is not None
+    assert all(torch.equal(second.init[name], value) for name, value in first.result.items())
+    assert second.epochs == max(1, round(8 * 12 / more)) and 1 <= second.epochs < 8
+    assert [(entry["env_steps"], entry["touch/taps"]) for entry in fits(run)] == [(12, taps), (24, more)]
+    # The replay holds the refitted encoder's features.
+    encoder = saved_encoder(run)
+    assert all(torch.equal(encoder.state_dict()[name], value) for name, value in second.result.items())
+    assert not all(torch.equal(second.result[name], value) for name, value in first.result.items())
+    assert_replay_features_are_the_encoders(buffer, encoder)
 
 
 @pytest.mark.parametrize("algo", ["dqn", "sac"])
@@ -779,6 +1151,7 @@ def test_report_and_typing_evaluate_a_touch_run_on_images(touch_runs, algo):
         ({"relabel": "bogus"}, "relabel must be one of"),
         ({"start_steps": 9}, "at least 10"),
         ({"touch_epochs": 0}, "touch_epochs"),
+        ({"touch_refits": -1}, "touch_refits must not be negative"),
     ],
 )
 def test_train_config_rejects_bad_touch_and_relabel_settings(env_datasets, changes, message):

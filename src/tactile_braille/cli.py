@@ -334,7 +334,9 @@ def _report(args: argparse.Namespace) -> int:
     if args.output is not None:
         from tactile_braille.evaluation.report import write_report as write_results
 
-        results = write_results(args.runs, args.output, title=args.title)
+        notes = args.notes.read_text() if args.notes is not None else None
+        command = "tactile-braille " + " ".join(args.argv) if args.argv else None
+        results = write_results(args.runs, args.output, title=args.title, notes=notes, command=command)
         print(results.read_text().split("![training curves]")[0])
         print(f"wrote {results} and its figures")
     return 0
@@ -506,9 +508,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--output",
         type=Path,
         default=None,
-        help="also write OUTPUT/results.md over all runs (Table III, curves, typing, Figure 4)",
+        help="also write a report over all runs (Table III, curves, typing, Figure 4): OUTPUT/results.md, "
+        "or OUTPUT itself if it ends in .md (its figures then go in a folder of the same name)",
     )
     report.add_argument("--title", default="Results", help="title of results.md")
+    report.add_argument("--notes", type=Path, default=None, help="Markdown file placed after the table")
     report.set_defaults(handler=_report)
 
     evaluate = commands.add_parser("evaluate", help="the paper's typing evaluation of a training run")
@@ -583,7 +587,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``tactile-braille``."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv
     try:
         return args.handler(args)
     except (FileExistsError, FileNotFoundError, ValueError, RigError) as error:

@@ -19,8 +19,13 @@ that ended in a press of a task key, right or wrong), or a uniformly random
 goal (a press of key k then teaches "not here" for the other goals). No
 copies are stored.
 
-Observations are tactile images or, for agents on a pretrained touch
-encoder, feature vectors (``observation_shape=(n,)``, stored as float32).
+Observations are tactile images or feature vectors (``observation_shape=(n,)``,
+stored as float32). Each stored frame may carry *labels*, what a robot knows
+of a tap without touch (sensor pose, pressed key, key under the sensor), and
+an image buffer may be given an *encoder* (:meth:`set_encoder`): batches then
+hold its features of the stored images, kept in a cache that
+:meth:`set_encoder` recomputes when the encoder changes (a touch encoder
+refitted on the labelled frames, :mod:`~tactile_braille.agents.touch`).
 
 Memory at the paper's capacity of 100,000 transitions: the frame ring holds
 twice as many frames as transitions (episodes of one step need two frames
@@ -40,6 +45,8 @@ from tactile_braille._io import atomic_path
 
 PACKED_BYTES = 100 * 100 // 8
 RELABELLING = ("paper", "all")
+FRAME_LABELS = 5
+"""Labels of a frame: sensor x, y, depth (mm), pressed key, key under the sensor."""
 
 
 def _goal_index(one_hot: np.ndarray) -> int:
@@ -117,6 +124,11 @@ class EpisodeReplayBuffer:
         self.finals = np.full(self.capacity, -1, dtype=np.int16)
         self.next_frame = 0
         self.frames_written = 0
+        # Per frame: sensor x, y, depth (mm), pressed key, key under the sensor (goal indices, -1 none);
+        # NaN where a frame came without labels.
+        self.frame_labels = np.full((self.frame_capacity, FRAME_LABELS), np.nan, dtype=np.float32)
+        self.features: np.ndarray | None = None  # the encoder's features of the frames (set_encoder)
+        self._encode = None
         self._committed = (0, 0)  # (next_frame, frames_written) after the last committed episode
         self.next_slot = 0
         self.size = 0
@@ -125,33 +137,41 @@ class EpisodeReplayBuffer:
         self._current_previous_action: np.ndarray | None = None
 
     # --------------------------------------------------------- writing
-    def _store_frame(self, image: np.ndarray) -> int:
+    def _store_frame(self, image: np.ndarray, label: np.ndarray | None = None) -> int:
         slot = self.next_frame
         if self.images:
             self.frames[slot] = np.packbits(np.asarray(image).reshape(-1) > 127)
         else:
             self.frames[slot] = image
+        self.frame_labels[slot] = np.nan if label is None else label
+        if self._encode is not None:
+            self.features[slot] = self._encode(self._images(np.array([slot])))[0]
         self.next_frame = (self.next_frame + 1) % self.frame_capacity
         self.frames_written += 1
         return slot
 
-    def start_episode(self, observation: dict[str, np.ndarray]) -> None:
-        """Store an episode's first observation."""
+    def start_episode(self, observation: dict[str, np.ndarray], label: np.ndarray | None = None) -> None:
+        """Store an episode's first observation (and its frame's labels, if known)."""
         self._episode = []
-        self._current_frame = self._store_frame(observation["observation"])
+        self._current_frame = self._store_frame(observation["observation"], label)
         self._current_previous_action = np.asarray(observation["previous_action"], dtype=np.float32)
 
     def add_step(
-        self, action, reward: float, next_observation: dict[str, np.ndarray], terminated: bool
+        self,
+        action,
+        reward: float,
+        next_observation: dict[str, np.ndarray],
+        terminated: bool,
+        label: np.ndarray | None = None,
     ) -> None:
-        """Record one step of the episode in progress (goal = its desired goal)."""
+        """Record one step of the episode in progress (its goal: the desired one; ``label``: its frame's)."""
         if self._current_frame < 0:
             raise RuntimeError("call start_episode before add_step")
         if len(self._episode) >= self.max_episode_steps:
             raise RuntimeError(
                 f"episode longer than max_episode_steps={self.max_episode_steps}; build the buffer with more"
             )
-        next_frame = self._store_frame(next_observation["observation"])
+        next_frame = self._store_frame(next_observation["observation"], label)
         next_previous = np.asarray(next_observation["previous_action"], dtype=np.float32)
         self._episode.append(
             {
@@ -211,13 +231,14 @@ class EpisodeReplayBuffer:
         goals, rewards = self.goals[index], self.rewards[index]
         if self.her and self.relabel == "all":
             goals, rewards = self._relabel(index, rng)
+        observations = self._images if self.features is None else self.features.__getitem__
         return {
-            "images": self._images(frames[:, 0]),
+            "images": observations(frames[:, 0]),
             "previous_actions": self.previous_actions[index, 0],
             "goals": goals,
             "actions": self.actions[index],
             "rewards": rewards,
-            "next_images": self._images(frames[:, 1]),
+            "next_images": observations(frames[:, 1]),
             "next_previous_actions": self.previous_actions[index, 1],
             "dones": self.dones[index],
         }
@@ -238,23 +259,38 @@ class EpisodeReplayBuffer:
         rewards = ((self.achieved[index] == goal) & has_goal).astype(np.float32)
         return goals, rewards
 
-    def map_observations(self, encode, observation_shape: tuple[int, ...], batch_size: int = 1024) -> None:
-        """Replace every stored observation by ``encode(images)`` (e.g. a touch encoder's features).
+    def _written_frames(self) -> np.ndarray:
+        """Slots that hold a frame (committed or of the episode in progress)."""
+        return np.arange(min(self.frames_written, self.frame_capacity))
 
-        ``encode`` takes (B, 1, 100, 100) uint8 images and returns (B, n)
-        float32 features; transitions, goals and the episode in progress keep
-        their frame indices, so the buffer stays consistent.
+    def set_encoder(self, encode, size: int, batch_size: int = 1024) -> None:
+        """From now on, batches hold ``encode``'s features of the stored images (recomputed now).
+
+        ``encode`` takes (B, 1, 100, 100) uint8 images and returns (B, size)
+        float32 features. Call it again after the encoder changed.
         """
         if not self.images:
-            raise ValueError("this buffer holds features already")
-        if len(observation_shape) != 1:
-            raise ValueError(f"features must be vectors, got shape {observation_shape}")
-        written = min(self.frames_written, self.frame_capacity)
-        features = np.zeros((self.frame_capacity, observation_shape[0]), dtype=np.float32)
-        for start in range(0, written, batch_size):
-            frames = np.arange(start, min(start + batch_size, written))
+            raise ValueError("set_encoder needs a buffer of images")
+        features = np.zeros((self.frame_capacity, size), dtype=np.float32)
+        written = self._written_frames()
+        for start in range(0, len(written), batch_size):
+            frames = written[start : start + batch_size]
             features[frames] = encode(self._images(frames))
-        self.frames, self.images = features, False
+        self.features, self._encode = features, encode
+
+    def labelled_frames(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Images (N, 1, 100, 100), poses (N, 3), pressed and under-sensor keys (N,) of labelled frames."""
+        if not self.images:
+            raise ValueError("this buffer holds features, not images")
+        written = self._written_frames()
+        frames = written[~np.isnan(self.frame_labels[written, 0])]
+        labels = self.frame_labels[frames]
+        return (
+            self._images(frames),
+            labels[:, :3],
+            labels[:, 3].astype(np.int64),
+            labels[:, 4].astype(np.int64),
+        )
 
     # ------------------------------------------------------ checkpoints
     _ARRAYS = (
@@ -262,7 +298,8 @@ class EpisodeReplayBuffer:
         "achieved", "finals",
     )  # fmt: skip
     _ADDED_LATER: ClassVar[dict[str, int]] = {"achieved": -1, "finals": -1}
-    """Arrays that older buffers lack, and their fill value (no key known)."""
+    """Arrays that older buffers lack, and their fill value (no key known); older buffers' frames have
+    no labels."""
 
     def save(self, path: str | Path) -> None:
         """Write the used part of the buffer (committed transitions) atomically as ``.npz``.
@@ -280,6 +317,7 @@ class EpisodeReplayBuffer:
                 counters=np.array([next_frame, frames_written, self.next_slot, self.size]),
                 frame_capacity=np.array(self.frame_capacity),
                 frames=self.frames[:frames],
+                frame_labels=self.frame_labels[:frames],
                 **arrays,
             )
 
@@ -300,11 +338,23 @@ class EpisodeReplayBuffer:
                 mine = getattr(self, name)
                 if array.shape[1:] != mine.shape[1:] or len(array) > len(mine):
                     raise ValueError(f"{path}: {name} of shape {array.shape} does not fit {mine.shape}")
+            labels = data.get("frame_labels")
+            if labels is not None and (
+                labels.shape[1:] != self.frame_labels.shape[1:] or len(labels) > self.frame_capacity
+            ):
+                raise ValueError(
+                    f"{path}: frame_labels of shape {labels.shape} does not fit {self.frame_labels.shape}"
+                )
             for name, array in stored.items():
                 getattr(self, name)[: len(array)] = array
+            self.frame_labels[:] = np.nan
+            if labels is not None:
+                self.frame_labels[: len(labels)] = labels
             self.next_frame, self.frames_written, self.next_slot, self.size = (
                 int(v) for v in data["counters"]
             )
             self._committed = (self.next_frame, self.frames_written)
         self._episode = []
         self._current_frame = -1
+        if self._encode is not None:
+            self.set_encoder(self._encode, self.features.shape[1])

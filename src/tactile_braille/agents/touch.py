@@ -1,17 +1,19 @@
-"""A touch encoder learnt from the run's own first taps, labelled by what the robot knows.
+"""A touch encoder learnt from the run's own taps, labelled by what the robot knows.
 
 A robot knows three things about every tap without touch: where the sensor
 was (the arm's kinematics), which key lies under it there (the calibrated
 keyboard layout, :class:`KeyLocator`) and which key, if any, the keyboard
-reported. During
-its first ``start_steps`` (random actions, as in the paper) a run keeps each
-tactile image with those two labels; then it fits a CNN (the paper's
-encoder, a projection to a few features) to predict the pose, the key under the
-sensor and the pressed key from the image, freezes it, and the reinforcement learner works on its
-features: the replay stores features and the updates are dense layers only.
+reported. A touch-encoder run stores those labels with every frame of its
+replay. After its first ``start_steps`` (random actions, as in the paper) it
+fits a CNN (the paper's convolutions, a projection to a few features) to
+predict the three from the image, and the reinforcement learner works on the
+frozen encoder's features: the updates are dense layers only, on a feature
+cache of the replay's images. Every ``touch_refit_every`` steps the encoder
+is refitted, from its current weights, on all labelled frames so far, and the
+cache is recomputed: perception keeps improving with the run's own data.
 
-No data is added: the labelled taps are the run's own first steps and are
-counted in its epochs. Nothing about the goal or the reward is used.
+No data is added: the labelled taps are the run's own steps, counted in its
+epochs. Nothing about the goal or the reward is used.
 
 >>> import numpy as np
 >>> taps = LabelledTaps()
@@ -124,7 +126,9 @@ class KeyLocator:
 
     def __init__(self, layout, keys) -> None:
         self.centres = np.array([layout.centre_mm(k) for k in keys])
-        self.half = np.array([layout.key(k).footprint_mm for k in keys]) / 2
+        # Cells on the layout's own pitch (``Key.footprint_mm`` assumes the nominal 19 mm).
+        pitch = layout.pitch_mm
+        self.half = np.array([(pitch, layout.key(k).width_u * pitch) for k in keys]) / 2
 
     def __call__(self, pose_mm: np.ndarray) -> int:
         """Goal index of the key under (x, y), -1 for none of the task's keys."""
@@ -167,33 +171,20 @@ class LabelledTaps:
         """Images (N, 1, 100, 100) uint8, poses (N, 3) float32, pressed keys (N,) int64."""
         return np.stack(self.images)[:, None], np.stack(self.poses), np.array(self.pressed, dtype=np.int64)
 
-    def save(self, path) -> None:
-        """Write the taps atomically (``.npz``), for a run that checkpoints before its encoder is fitted."""
-        from tactile_braille._io import atomic_path
-
-        images, poses, pressed = self.arrays() if len(self) else (np.zeros((0, 1, 100, 100), np.uint8),
-                                                                  np.zeros((0, 3), np.float32),
-                                                                  np.zeros(0, np.int64))  # fmt: skip
-        with atomic_path(path, fsync=True) as temporary, open(temporary, "wb") as handle:
-            np.savez_compressed(
-                handle,
-                images=images,
-                poses=poses,
-                pressed=pressed,
-                under=np.array(self.under, dtype=np.int64),
-            )
-
-    def load(self, path) -> None:
-        """Replace the taps by those :meth:`save` wrote."""
-        with np.load(path) as data:
-            images, poses, pressed = data["images"], data["poses"], data["pressed"]
-            under = data["under"] if "under" in data else np.full(len(pressed), -1)
+    @classmethod
+    def from_arrays(cls, images, poses, pressed, under) -> LabelledTaps:
+        """Taps from arrays (as :meth:`EpisodeReplayBuffer.labelled_frames` returns them)."""
         if not (len(images) == len(poses) == len(pressed) == len(under)):
-            raise ValueError(f"{path}: images, poses and keys differ in number")
-        self.images = [image[0] for image in images]
-        self.poses = list(poses)
-        self.pressed = [int(p) for p in pressed]
-        self.under = [int(u) for u in under]
+            raise ValueError("images, poses and keys differ in number")
+        taps = cls()
+        for image, pose, key, below in zip(images, poses, pressed, under, strict=True):
+            taps.add(image, pose, int(key), int(below))
+        return taps
+
+    @staticmethod
+    def label(pose_mm: np.ndarray, pressed: int, under: int) -> np.ndarray:
+        """A frame's labels as the replay stores them: x, y, depth, pressed key, key under the sensor."""
+        return np.array([*np.asarray(pose_mm, dtype=np.float32)[:3], pressed, under], dtype=np.float32)
 
 
 def fit_touch_encoder(
@@ -202,8 +193,11 @@ def fit_touch_encoder(
     config: TouchEncoderConfig | None = None,
     seed: int = 0,
     device: str | torch.device = "cpu",
+    init: TouchEncoder | None = None,
 ) -> tuple[TouchEncoder, dict[str, float]]:
     """Fit a :class:`TouchEncoder` to labelled taps; returns it (frozen, eval mode) and held-out figures.
+
+    ``init``: an encoder whose weights the fit starts from (a refit), else a fresh one.
 
     The figures, on the held-out taps: ``touch/pose_error_mm`` (median
     distance in the plane), ``touch/depth_error_mm`` (median),
@@ -227,6 +221,9 @@ def fit_touch_encoder(
     train = order[len(held) :]
     device = torch.device(device)
     model = TouchEncoder(keys, config.features, config.hidden).to(device)
+    if init is not None:
+        model.load_state_dict(init.state_dict())
+        model.requires_grad_(True)
     mean, scale = poses[train].mean(0), poses[train].std(0) + 1e-3
     model.pose_mean.copy_(torch.as_tensor(mean))
     model.pose_scale.copy_(torch.as_tensor(scale))

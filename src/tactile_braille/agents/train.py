@@ -85,10 +85,12 @@ class TrainConfig:
         relabel: ``"paper"`` (copies of wrong-press episodes, the paper's) or
             ``"all"`` (every transition for every goal, relabelled when sampled;
             :mod:`~tactile_braille.agents.replay`).
-        touch_encoder: fit a touch encoder on the labelled taps of the first
-            ``start_steps`` and learn on its features
-            (:mod:`~tactile_braille.agents.touch`); not the paper's.
-        touch_epochs: passes of the touch encoder's fit over those taps.
+        touch_encoder: label every frame with the sensor pose and keys (what the robot
+            knows), fit a touch encoder on the labelled frames after ``start_steps`` and learn on
+            its features (:mod:`~tactile_braille.agents.touch`); not the paper's.
+        touch_epochs: passes of the touch encoder's first fit over those taps.
+        touch_refits: refits of the touch encoder on all labelled frames so far, after
+            2, 4, 8... times ``start_steps`` (each as many gradient steps as the first fit).
         test_episodes: deterministic test episodes after each epoch.
         max_episode_steps: episode cut (None: the registry's 25).
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
@@ -116,6 +118,7 @@ class TrainConfig:
     relabel: str = "paper"
     touch_encoder: bool = False
     touch_epochs: int = 40
+    touch_refits: int = 0
     test_episodes: int = 20
     max_episode_steps: int | None = None
     backend: str = "dataset"
@@ -161,6 +164,8 @@ class TrainConfig:
             raise ValueError(
                 f"a touch encoder learns from the start steps: need at least 10, got {self.start_steps}"
             )
+        if self.touch_refits < 0:
+            raise ValueError(f"touch_refits must not be negative, got {self.touch_refits}")
         if self.touch_epochs < 1:
             raise ValueError(f"touch_epochs must be at least 1, got {self.touch_epochs}")
         if self.max_episode_steps is not None and self.max_episode_steps < 1:
@@ -300,12 +305,12 @@ def train(
         her=config.her,
         max_episode_steps=max(getattr(env.spec, "max_episode_steps", None) or 0, 100),
         relabel=config.relabel,
-        observation_shape=(agent.touch.features_size,) if touch and agent.fitted else (100, 100, 1),
     )
-    # A touch-encoder run keeps its first steps' taps with their labels until the encoder is fitted.
-    taps = LabelledTaps() if touch and not agent.fitted else None
+    # A touch-encoder run labels every frame with what the robot knows (pose, pressed key, key under
+    # the sensor) and fits its encoder on the labelled frames at the fit steps.
     braille = hasattr(env.unwrapped, "layout")  # goal-conditioned toys have no keyboard to locate keys on
     locate = KeyLocator(env.unwrapped.layout, env.unwrapped.goal_keys) if touch and braille else None
+    fit_steps = touch_fit_steps(config) if touch else ()
     rng = np.random.default_rng(config.seed)
     start_epoch, env_steps, updates = 0, 0, 0
     if state is not None:
@@ -315,21 +320,36 @@ def train(
             torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
         start_epoch, env_steps, updates = state["epoch"] + 1, state["env_steps"], state["updates"]
         buffer.load(run_dir / state["replay"])
-        if taps is not None and state.get("taps"):
-            taps.load(run_dir / state["taps"])
+    if touch and agent.fitted:
+        buffer.set_encoder(agent.touch.encode, agent.touch.features_size)
 
-    def stored(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """What the replay keeps of an observation: the image, or the fitted encoder's features."""
-        return agent.features(observation) if touch and agent.fitted else observation
+    def label(observation: dict[str, np.ndarray], info: dict) -> np.ndarray | None:
+        if not touch:
+            return None
+        achieved = observation["achieved_goal"]
+        pose = info["sensor_pose_mm"]
+        pressed = int(achieved.argmax()) if achieved.any() else -1
+        return LabelledTaps.label(pose, pressed, locate(pose) if locate is not None else -1)
 
     def fit_touch() -> None:
-        encoder, metrics = fit_touch_encoder(
-            taps, buffer.goal_size, TouchEncoderConfig(epochs=config.touch_epochs), config.seed, agent.device
+        """Fit (or refit, from the current weights) the touch encoder on every labelled frame so far."""
+        taps = LabelledTaps.from_arrays(*buffer.labelled_frames())
+        first = not agent.fitted
+        # A refit sees more taps: as many gradient steps as the first fit, so its cost stays flat.
+        epochs = (
+            config.touch_epochs if first else max(1, round(config.touch_epochs * fit_steps[0] / len(taps)))
         )
+        encoder, metrics = fit_touch_encoder(
+            taps, buffer.goal_size, TouchEncoderConfig(epochs=epochs), config.seed + env_steps, agent.device,
+            init=None if first else agent.touch,
+        )  # fmt: skip
         agent.fit(encoder)
-        buffer.map_observations(agent.touch.encode, (agent.touch.features_size,))
-        with atomic_path(run_dir / "touch.json") as temporary:
-            temporary.write_text(json.dumps({**metrics, "env_steps": env_steps}, indent=2))
+        buffer.set_encoder(agent.touch.encode, agent.touch.features_size)
+        path = run_dir / "touch.json"
+        fits = json.loads(path.read_text())["fits"] if path.exists() else []
+        fits.append({**metrics, "env_steps": env_steps})
+        with atomic_path(path) as temporary:
+            temporary.write_text(json.dumps({"fits": fits}, indent=2))
 
     def random_action():
         if action_shape:
@@ -343,9 +363,7 @@ def train(
 
         bar = tqdm(total=config.epochs, initial=start_epoch, desc=run_dir.name, unit="epoch")
     observation, info = env.reset(seed=int(rng.integers(2**31)))
-    if taps is not None:
-        taps.add_observation(observation, info, locate)
-    buffer.start_episode(stored(observation))
+    buffer.start_episode(observation, label(observation, info))
     episode_return, recent_returns, losses = 0.0, [], {}
     burst = config.update_every * config.updates_per_step
     try:
@@ -357,9 +375,7 @@ def train(
                 else:
                     action = agent.policy_action(observation, env_steps, explore=True, rng=rng)
                 observation, reward, terminated, truncated, info = env.step(action)
-                if taps is not None:
-                    taps.add_observation(observation, info, locate)
-                buffer.add_step(action, reward, stored(observation), terminated)
+                buffer.add_step(action, reward, observation, terminated, label(observation, info))
                 episode_return += reward
                 env_steps += 1
                 if terminated or truncated:
@@ -367,12 +383,9 @@ def train(
                     recent_returns.append(episode_return)
                     episode_return = 0.0
                     observation, info = env.reset(seed=int(rng.integers(2**31)))
-                    if taps is not None and env_steps < config.start_steps:
-                        taps.add_observation(observation, info, locate)
-                    buffer.start_episode(stored(observation))
-                if taps is not None and env_steps >= config.start_steps:
+                    buffer.start_episode(observation, label(observation, info))
+                if env_steps in fit_steps:
                     fit_touch()
-                    taps = None
                 if (
                     env_steps >= config.start_steps
                     and env_steps % config.update_every == 0
@@ -408,7 +421,7 @@ def train(
                 with atomic_path(run_dir / "snapshots" / f"epoch_{epoch:04d}.pt") as temporary:
                     torch.save(agent.policy_state_dict(), temporary)
             if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
-                _save_checkpoint(run_dir, agent, buffer, rng, epoch, env_steps, updates, taps)
+                _save_checkpoint(run_dir, agent, buffer, rng, epoch, env_steps, updates)
     finally:
         if bar is not None:
             bar.close()
@@ -424,30 +437,29 @@ def snapshot_epochs(epochs: int, snapshots: int) -> set[int]:
     return {round(float(e)) for e in np.linspace(0, epochs - 1, min(snapshots, epochs))}
 
 
-def _save_checkpoint(
-    run_dir: Path, agent, buffer, rng, epoch: int, env_steps: int, updates: int, taps: LabelledTaps | None
-) -> None:
-    """Write the replay buffer (and labelled taps), then the checkpoint that names them, then drop older ones.
+def touch_fit_steps(config: TrainConfig) -> tuple[int, ...]:
+    """Environment steps after which a touch-encoder run fits its encoder: the start steps, then doubling."""
+    return tuple(config.start_steps * 2**k for k in range(config.touch_refits + 1))
+
+
+def _save_checkpoint(run_dir: Path, agent, buffer, rng, epoch: int, env_steps: int, updates: int) -> None:
+    """Write the replay buffer, then the checkpoint that names it, then drop older buffers.
 
     Each step is atomic, so a crash anywhere leaves the previous checkpoint and
-    the files it names intact. The episode in progress is not saved: it
+    the buffer it names intact. The episode in progress is not saved: it
     restarts on resume.
     """
     replay = f"replay.{epoch}.npz"
     buffer.save(run_dir / replay)
-    taps_file = None
-    if taps is not None:
-        taps_file = f"taps.{epoch}.npz"
-        taps.save(run_dir / taps_file)
     state = {
         "agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
         "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
-        "epoch": epoch, "env_steps": env_steps, "updates": updates, "replay": replay, "taps": taps_file,
+        "epoch": epoch, "env_steps": env_steps, "updates": updates, "replay": replay,
     }  # fmt: skip
     with atomic_path(run_dir / "checkpoint.pt", fsync=True) as temporary:
         torch.save(state, temporary)
-    for old in [*run_dir.glob("replay.*.npz"), *run_dir.glob("taps.*.npz")]:
-        if old.name not in (replay, taps_file):
+    for old in run_dir.glob("replay.*.npz"):
+        if old.name != replay:
             old.unlink()
 
 
