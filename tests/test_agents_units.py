@@ -798,3 +798,16 @@ def test_replay_save_leaves_out_the_episode_in_progress(tmp_path):
     restored = EpisodeReplayBuffer(10, 4, (), 5, her=False, max_episode_steps=5)
     restored.load(tmp_path / "replay.npz")
     assert (restored.frames_written, restored.next_frame, restored.size) == (2, 2, 1)
+
+
+def test_cli_offers_every_preset_and_fast_changes_the_papers_settings():
+    from tactile_braille.agents.presets import PRESETS, preset_config
+    from tactile_braille.cli import PRESET_NAMES
+
+    assert PRESET_NAMES == PRESETS
+    paper = preset_config("paper", "tactile_braille/DiscreteAlphabet-v0", "dqn")
+    fast = preset_config("fast", "tactile_braille/DiscreteAlphabet-v0", "dqn")
+    assert (paper.relabel, paper.touch_encoder, paper.epochs) == ("paper", False, 100)
+    assert (fast.relabel, fast.touch_encoder, fast.epochs) == ("all", True, 25)
+    assert fast.agent.hidden == (256, 256) and fast.agent.epsilon_decay_steps == 1000
+    assert preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", "sac").epochs == 90

@@ -1094,9 +1094,13 @@ def test_a_run_resumed_after_the_fit_reencodes_its_replay_with_the_loaded_encode
     assert [row["env_steps"] for row in rows] == [20, 40] and rows[1]["updates"] > rows[0]["updates"]
 
 
-def test_touch_fit_steps_double_from_the_start_steps(env_datasets):
+def test_touch_fit_steps_follow_the_start_steps_at_the_refit_interval(env_datasets):
     assert train_module.touch_fit_steps(touch_config(env_datasets)) == (12,)
-    assert train_module.touch_fit_steps(touch_config(env_datasets, touch_refits=3)) == (12, 24, 48, 96)
+    assert train_module.touch_fit_steps(touch_config(env_datasets, touch_refits=3)) == (12, 24, 36, 48)
+    every = touch_config(env_datasets, touch_refits=2, touch_refit_every=5)
+    assert train_module.touch_fit_steps(every) == (12, 17, 22)
+    with pytest.raises(ValueError, match="touch_refit_every must be at least 1"):
+        touch_config(env_datasets, touch_refit_every=0)
 
 
 def test_a_refit_starts_from_the_current_encoder_on_every_labelled_frame_so_far(env_datasets, tmp_path):

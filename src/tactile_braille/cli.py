@@ -17,6 +17,9 @@ import numpy as np
 from tactile_braille.rigs.base import RigError
 from tactile_braille.sensor.config import PRESETS
 
+PRESET_NAMES = ("paper", "released", "fast")
+"""Training presets (:data:`tactile_braille.agents.presets.PRESETS`, not imported here: it pulls in torch)."""
+
 
 def _show(args: argparse.Namespace) -> int:
     from tactile_braille.gallery import dataset_figure, live_gallery_tiles, save_figure, save_gallery
@@ -468,9 +471,9 @@ def build_parser() -> argparse.ArgumentParser:
     trainer.add_argument("algo", nargs="?", default="dqn", choices=("dqn", "sac_discrete", "sac", "td3"))
     trainer.add_argument(
         "--preset",
-        choices=("paper", "released"),
+        choices=PRESET_NAMES,
         default="paper",
-        help="the paper's hyperparameters or the released code's (docs/agents.md)",
+        help="the paper's hyperparameters, the released code's, or ours (fast) (docs/agents.md)",
     )
     trainer.add_argument("--seed", type=int, default=None, help="default 0")
     trainer.add_argument("--epochs", type=int, default=None, help="default: the preset's")
@@ -527,7 +530,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sweeper.add_argument("--algos", nargs="+", required=True, choices=("dqn", "sac_discrete", "sac", "td3"))
     sweeper.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    sweeper.add_argument("--preset", choices=("paper", "released"), default="paper")
+    sweeper.add_argument("--preset", choices=PRESET_NAMES, default="paper")
     sweeper.add_argument("--backend", choices=("dataset", "render"), default=None)
     sweeper.add_argument("--report", type=Path, default=None, help="write REPORT/results.md over the runs")
     _add_sweep_options(sweeper, "runs/sweep")

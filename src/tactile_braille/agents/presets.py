@@ -1,9 +1,12 @@
-"""Named hyperparameter presets: the paper's Table II and the released code's settings.
+"""Named hyperparameter presets: the paper's Table II, the released code's settings, and ours.
 
 ``paper`` follows the paper's Table II, taking the released code's values
 where the table is silent; ``released`` reproduces the configurations saved
 with the original runs (``reference/braille_rl_2020/.../config.json``). The
 differences are listed in ``docs/agents.md`` and in :data:`DIFFERENCES`.
+``fast`` is ours (docs/agents.md, "Beyond the paper"): a touch encoder
+fitted and refitted on the run's own labelled taps, relabelling of every
+transition for every goal, and more, cheaper updates on the encoder's features.
 
 >>> config = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn")
 >>> config.epochs, config.updates_per_step, config.agent.gamma
@@ -15,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-PRESETS = ("paper", "released")
+PRESETS = ("paper", "released", "fast")
 
 # Epochs of the original runs (sim): discrete arrows 25, discrete alphabet 100,
 # continuous arrows 100, continuous alphabet 2000.
@@ -34,6 +37,34 @@ DIFFERENCES: dict[str, dict[str, tuple[Any, Any]]] = {
     "sac_discrete": {},
 }
 """algo -> setting -> (paper, released)."""
+
+FAST_EPOCHS = {
+    ("Discrete", "Arrows"): 8,
+    ("Discrete", "Alphabet"): 25,
+    ("Continuous", "Arrows"): 30,
+    ("Continuous", "Alphabet"): 90,
+}
+"""Epochs of the ``fast`` preset: a third of the paper's convergence epochs or less, and the
+90-epoch budget for the continuous alphabet."""
+
+
+def fast_settings(keys: str, algo: str) -> dict[str, Any]:
+    """What ``fast`` changes on top of the paper's settings, for a key set and an algorithm."""
+    arrows = keys == "Arrows"
+    settings: dict[str, Any] = {
+        "relabel": "all",
+        "touch_encoder": True,
+        "start_steps": 200 if arrows else 500,
+        "touch_refit_every": 200 if arrows else 500,
+        "touch_refits": 4 if arrows else 8,
+        "updates_per_step": 2 if algo == "td3" else 4,
+        "agent.hidden": (256, 256),
+        "agent.batch_size": 128,
+        "agent.learning_rate": 1e-3,
+    }
+    if algo == "dqn":
+        settings["agent.epsilon_decay_steps"] = 1000
+    return settings
 
 
 def _family(task: str) -> tuple[str, str]:
@@ -65,6 +96,10 @@ def preset_settings(name: str, task: str, algo: str) -> dict[str, Any]:
     }
     if name == "released":
         settings.update({key: value[1] for key, value in DIFFERENCES[algo].items()})
+    if name == "fast":
+        kind, keys = _family(task)
+        settings["epochs"] = FAST_EPOCHS[kind, keys]
+        settings.update(fast_settings(keys, algo))
     return settings
 
 

@@ -89,8 +89,9 @@ class TrainConfig:
             knows), fit a touch encoder on the labelled frames after ``start_steps`` and learn on
             its features (:mod:`~tactile_braille.agents.touch`); not the paper's.
         touch_epochs: passes of the touch encoder's first fit over those taps.
-        touch_refits: refits of the touch encoder on all labelled frames so far, after
-            2, 4, 8... times ``start_steps`` (each as many gradient steps as the first fit).
+        touch_refits: refits of the touch encoder on all labelled frames so far, every
+            ``touch_refit_every`` steps after the first fit (each as many gradient steps as the first fit).
+        touch_refit_every: environment steps between refits (None: ``start_steps``).
         test_episodes: deterministic test episodes after each epoch.
         max_episode_steps: episode cut (None: the registry's 25).
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
@@ -119,6 +120,7 @@ class TrainConfig:
     touch_encoder: bool = False
     touch_epochs: int = 40
     touch_refits: int = 0
+    touch_refit_every: int | None = None
     test_episodes: int = 20
     max_episode_steps: int | None = None
     backend: str = "dataset"
@@ -164,6 +166,8 @@ class TrainConfig:
             raise ValueError(
                 f"a touch encoder learns from the start steps: need at least 10, got {self.start_steps}"
             )
+        if self.touch_refit_every is not None and self.touch_refit_every < 1:
+            raise ValueError(f"touch_refit_every must be at least 1, got {self.touch_refit_every}")
         if self.touch_refits < 0:
             raise ValueError(f"touch_refits must not be negative, got {self.touch_refits}")
         if self.touch_epochs < 1:
@@ -438,8 +442,10 @@ def snapshot_epochs(epochs: int, snapshots: int) -> set[int]:
 
 
 def touch_fit_steps(config: TrainConfig) -> tuple[int, ...]:
-    """Environment steps after which a touch-encoder run fits its encoder: the start steps, then doubling."""
-    return tuple(config.start_steps * 2**k for k in range(config.touch_refits + 1))
+    """Environment steps after which a touch-encoder run fits its encoder: the start steps, then every
+    ``touch_refit_every`` steps, ``touch_refits`` times."""
+    every = config.touch_refit_every or config.start_steps
+    return tuple(config.start_steps + k * every for k in range(config.touch_refits + 1))
 
 
 def _save_checkpoint(run_dir: Path, agent, buffer, rng, epoch: int, env_steps: int, updates: int) -> None:
