@@ -811,3 +811,19 @@ def test_cli_offers_every_preset_and_fast_changes_the_papers_settings():
     assert (fast.relabel, fast.touch_encoder, fast.epochs) == ("all", True, 25)
     assert fast.agent.hidden == (256, 256) and fast.agent.epsilon_decay_steps == 1000
     assert preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", "sac").epochs == 90
+
+
+@pytest.mark.parametrize("algo", ["sac", "sac_discrete"])
+def test_initial_temperature_is_a_hyperparameter(algo):
+    from tactile_braille.agents.presets import preset_config
+    from tactile_braille.agents.train import AGENTS
+
+    task = "tactile_braille/ContinuousArrows-v0" if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
+    env = gym.make(task)
+    algorithm = AGENTS[algo]
+    agent = algorithm.agent(env.observation_space, env.action_space, algorithm.config(initial_alpha=0.05))
+    assert float(agent.log_alpha.exp()) == pytest.approx(0.05)
+    assert float(algorithm.agent(env.observation_space, env.action_space).log_alpha.exp()) == 1.0  # paper
+    with pytest.raises(ValueError, match="initial_alpha must be positive"):
+        algorithm.config(initial_alpha=0.0)
+    assert preset_config("fast", task, algo).agent.initial_alpha == 0.05

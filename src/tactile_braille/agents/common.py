@@ -28,7 +28,7 @@ def check_hyperparameters(config) -> None:
         problems.append(f"gamma must be in [0, 1], got {config.gamma}")
     if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
         problems.append(f"tau must be in (0, 1], got {config.tau}")
-    for name in ("learning_rate", "alpha_learning_rate"):
+    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha"):
         if getattr(config, name, 1.0) <= 0:
             problems.append(f"{name} must be positive, got {getattr(config, name)}")
     hidden = getattr(config, "hidden", (1,))

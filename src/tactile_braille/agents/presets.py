@@ -64,6 +64,8 @@ def fast_settings(keys: str, algo: str) -> dict[str, Any]:
     }
     if algo == "dqn":
         settings["agent.epsilon_decay_steps"] = 1000
+    if algo in ("sac", "sac_discrete"):
+        settings["agent.initial_alpha"] = 0.05  # press early: a high temperature pays for staying alive
     return settings
 
 

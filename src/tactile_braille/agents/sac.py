@@ -10,6 +10,7 @@ sample, the temperature towards the target entropy.
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -35,6 +36,9 @@ class SACConfig:
         gamma: discount.
         learning_rate: actor and critic step size.
         alpha_learning_rate: temperature step size.
+        initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
+            every step alive, and pressing ends an episode: a high temperature delays the first
+            presses until it has fallen (docs/agents.md).
         target_entropy: entropy the temperature steers the policy towards
             (the paper's -6 for a 3-D action; the usual choice is -3).
         tau: Polyak factor of the target critics (the paper's polyak 0.995).
@@ -48,6 +52,7 @@ class SACConfig:
     gamma: float = 0.95
     learning_rate: float = 5e-4
     alpha_learning_rate: float = 1e-3
+    initial_alpha: float = 1.0
     target_entropy: float = -6.0
     tau: float = 0.005
     batch_size: int = 32
@@ -94,7 +99,9 @@ class SACAgent(Agent):
         shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
         self.actor = GaussianPolicy(*sizes, encoder=shared, **actor_options).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
-        self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
+        self.log_alpha = torch.full(
+            (1,), math.log(config.initial_alpha), device=self.device, requires_grad=True
+        )
         self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)
         self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate)
         self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=config.alpha_learning_rate)

@@ -30,6 +30,9 @@ class DiscreteSACConfig:
         gamma: discount (the paper's 0.6 for discrete SAC).
         learning_rate: actor and critic step size.
         alpha_learning_rate: temperature step size.
+        initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
+            every step alive, and pressing ends an episode: a high temperature delays the first
+            presses until it has fallen (docs/agents.md).
         target_entropy_ratio: target entropy as a share of the maximum,
             ``ln(num_actions)`` (the released code's 0.1; the paper quotes
             the resulting 0.139, i.e. 0.1 ln 4).
@@ -44,6 +47,7 @@ class DiscreteSACConfig:
     gamma: float = 0.6
     learning_rate: float = 5e-4
     alpha_learning_rate: float = 1e-3
+    initial_alpha: float = 1.0
     target_entropy_ratio: float = 0.1
     tau: float = 0.005
     batch_size: int = 32
@@ -92,7 +96,9 @@ class DiscreteSACAgent(Agent):
         shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
         self.actor = PolicyNetwork(*sizes, encoder=shared, **actor_options).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
-        self.log_alpha = torch.zeros(1, device=self.device, requires_grad=True)
+        self.log_alpha = torch.full(
+            (1,), math.log(config.initial_alpha), device=self.device, requires_grad=True
+        )
         self.target_entropy = config.target_entropy_ratio * math.log(self.num_actions)
         self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)
         self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate)

@@ -14,6 +14,7 @@ goal at the start, middle and end of training).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from importlib import resources
@@ -95,7 +96,7 @@ class RunRecord:
             parts.append("no HER")
         if self.config.backend != "dataset":
             parts.append(f"{self.config.backend} backend")
-        return ", ".join(parts)
+        return ", ".join(parts + _departures(self.config))
 
     @property
     def convergence(self) -> int | None:
@@ -165,6 +166,28 @@ def _stat(values, digits: int = 1) -> str:
     low, high = bootstrap_ci(values)
     text = f"{np.mean(values):.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
     return text + (f"; IQM {iqm(values):.{digits}f}" if len(values) >= 4 else "")
+
+
+_RUN_SETTINGS = {"seed", "epochs", "threads", "device", "dataset", "precision", "her", "backend",
+                 "checkpoint_every", "snapshots", "test_episodes"}  # fmt: skip
+"""Settings that do not make a variant (or are named by it already)."""
+
+
+def _departures(config: TrainConfig) -> list[str]:
+    """``name=value`` for each setting in which a run departs from its preset (an ablation)."""
+    from tactile_braille.agents.presets import PRESETS, preset_config
+
+    if config.preset not in PRESETS:
+        return []
+    reference = preset_config(config.preset, config.task, config.algo)
+    changes = [
+        f"{name}={getattr(config, name)}"
+        for name in sorted(set(config.to_json()) - _RUN_SETTINGS - {"agent", "task", "algo", "preset"})
+        if getattr(config, name) != getattr(reference, name)
+    ]
+    agent, base = dataclasses.asdict(config.agent), dataclasses.asdict(reference.agent)
+    changes += [f"{name}={agent[name]}" for name in sorted(agent) if agent[name] != base[name]]
+    return changes
 
 
 def _label(algo: str, variant: str) -> str:

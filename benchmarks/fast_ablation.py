@@ -1,0 +1,79 @@
+"""Ablation of the ``fast`` preset: each of its parts taken away, on the same seeds and budget.
+
+Trains (or continues, if its folder exists) one run per variant and seed under
+``runs/ablation/`` and prints, per variant, the convergence epoch under the
+paper's rule and the first epoch at 0.95, with the wall clock per run. The
+report command turns the same runs into the table and curves of
+docs/results.md.
+
+    python benchmarks/fast_ablation.py --task DiscreteAlphabet-v0 --algo dqn --seeds 0
+    python benchmarks/fast_ablation.py --variants fast no-refits --seeds 0 1 2
+
+Variants (``fast`` with one change each; ``paper+all`` is the paper's preset
+with only the relabelling of every transition added, on images):
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from tactile_braille.agents.presets import preset_config
+from tactile_braille.agents.report import convergence_epoch
+from tactile_braille.agents.train import read_progress, train
+
+VARIANTS = {
+    "fast": ("fast", {}),
+    "no-refits": ("fast", {"touch_refits": 0}),
+    "paper-relabel": ("fast", {"relabel": "paper"}),
+    "paper+all": ("paper", {"relabel": "all"}),
+}
+__doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
+                   VARIANTS.items())  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--task", default="DiscreteAlphabet-v0")
+    parser.add_argument("--algo", default="dqn")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--epochs", type=int, default=None, help="default: the fast preset's")
+    parser.add_argument("--root", type=Path, default=Path("runs/ablation"))
+    args = parser.parse_args()
+    task = f"tactile_braille/{args.task}"
+    epochs = args.epochs or preset_config("fast", task, args.algo).epochs
+    print(f"{args.task}, {args.algo}, {epochs} epochs, seeds {args.seeds}")
+    print("| variant | seeds | convergence epoch (paper's rule) | first epoch >= 0.95 | minutes per run |")
+    print("|---|---|---|---|---|")
+    for name in args.variants:
+        preset, changes = VARIANTS[name]
+        paper_rule, absolute, minutes = [], [], []
+        for seed in args.seeds:
+            run = args.root / f"{args.task.split('-')[0]}__{args.algo}__{name}__{seed}"
+            config = preset_config(preset, task, args.algo, seed=seed, epochs=epochs, threads=1, **changes)
+            if (run / "checkpoint.pt").exists():
+                train(run_dir=run, resume=True, progress=False)
+            else:
+                train(config, run_dir=run, progress=False)
+            returns = [row["test/episodic_return"] for row in read_progress(run)]
+            paper_rule.append(convergence_epoch(returns))
+            absolute.append(convergence_epoch(returns, level=0.95))
+            minutes.append(sum(row["time_s"] for row in read_progress(run)) / 60)
+
+        def mean(values):
+            reached = [v for v in values if v is not None]
+            text = f"{np.mean(reached):.1f}" if reached else "-"
+            return text + ("" if len(reached) == len(values) else f" ({len(reached)}/{len(values)} reached)")
+
+        print(
+            f"| {name} | {len(args.seeds)} | {mean(paper_rule)} | {mean(absolute)} | {np.mean(minutes):.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
