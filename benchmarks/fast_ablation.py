@@ -27,6 +27,7 @@ from tactile_braille.agents.train import read_progress, train
 VARIANTS = {
     "fast": ("fast", {}),
     "no-refits": ("fast", {"touch_refits": 0}),
+    "refit-500": ("fast", {"touch_refit_every": 500, "touch_refits": 8}),
     "paper-relabel": ("fast", {"relabel": "paper"}),
     "paper+all": ("paper", {"relabel": "all"}),
 }
