@@ -362,9 +362,6 @@ def save_keycap_preview(caps: list[Keycap], path: str | Path) -> Path:
     fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04).set_label("height (mm)", fontsize=8)
     fig.suptitle("Braille keycaps (STL, mm): shaded tops; underside with the MX socket", fontsize=10)
     fig.tight_layout()
-    try:
-        with atomic_path(path) as temporary:
-            fig.savefig(temporary, format="png", dpi=110)
-    finally:
-        plt.close(fig)
-    return Path(path)
+    from tactile_braille.gallery import save_figure
+
+    return save_figure(fig, path)
