@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 OUT ?= outputs
 
-.PHONY: run test test-slow lint bench clean
+.PHONY: run test test-slow lint bench results clean
 
 # torch is pinned to the CPU build that the project's machines hold; a looser
 # pin would download gigabytes of CUDA packages.
@@ -46,6 +46,12 @@ bench: $(STAMP)
 	$(PY) benchmarks/collect.py
 	$(PY) benchmarks/separability.py
 	$(PY) benchmarks/train_throughput.py
+
+# docs/results.md, generated whole from the training runs under runs/ (not committed: they are
+# made by `tactile-braille train`, see docs/results.md for the list and the commands).
+results: $(STAMP)
+	$(TB) report runs/paper/* runs/fast/* runs/ablation/* --output docs/results.md \
+		--notes docs/results-notes.md --title "Results: the paper's presets and ours"
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

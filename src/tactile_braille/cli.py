@@ -7,6 +7,7 @@ import matplotlib
 matplotlib.use("Agg")  # the command only writes files
 
 import argparse
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -338,7 +339,7 @@ def _report(args: argparse.Namespace) -> int:
         from tactile_braille.evaluation.report import write_report as write_results
 
         notes = args.notes.read_text() if args.notes is not None else None
-        command = "tactile-braille " + " ".join(args.argv) if args.argv else None
+        command = "tactile-braille " + shlex.join(args.argv) if args.argv else None
         results = write_results(args.runs, args.output, title=args.title, notes=notes, command=command)
         print(results.read_text().split("![training curves]")[0])
         print(f"wrote {results} and its figures")
