@@ -351,6 +351,9 @@ def train(
         buffer.set_encoder(agent.touch.encode, agent.touch.features_size)
         path = run_dir / "touch.json"
         fits = json.loads(path.read_text())["fits"] if path.exists() else []
+        fits = [
+            fit for fit in fits if fit["env_steps"] < env_steps
+        ]  # a fit redone after a resume replaces its first
         fits.append({**metrics, "env_steps": env_steps})
         with atomic_path(path) as temporary:
             temporary.write_text(json.dumps({"fits": fits}, indent=2))
