@@ -162,10 +162,8 @@ class LabelledTaps:
         self, observation: dict[str, np.ndarray], info: dict, locate: KeyLocator | None = None
     ) -> None:
         """A tap as an environment reports it (``sensor_pose_mm`` in info, the achieved goal)."""
-        achieved = observation["achieved_goal"]
-        pose = info["sensor_pose_mm"]
-        pressed = int(achieved.argmax()) if achieved.any() else -1
-        self.add(observation["observation"], pose, pressed, locate(pose) if locate is not None else -1)
+        x, y, depth, pressed, under = observation_label(observation, info, locate)
+        self.add(observation["observation"], np.array([x, y, depth]), int(pressed), int(under))
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Images (N, 1, 100, 100) uint8, poses (N, 3) float32, pressed keys (N,) int64."""
@@ -185,6 +183,18 @@ class LabelledTaps:
     def label(pose_mm: np.ndarray, pressed: int, under: int) -> np.ndarray:
         """A frame's labels as the replay stores them: x, y, depth, pressed key, key under the sensor."""
         return np.array([*np.asarray(pose_mm, dtype=np.float32)[:3], pressed, under], dtype=np.float32)
+
+
+def observation_label(
+    observation: dict[str, np.ndarray], info: dict, locate: KeyLocator | None
+) -> np.ndarray:
+    """The labels of an environment's observation (:meth:`LabelledTaps.label`): the sensor pose in
+    ``info``, the pressed task key from the achieved goal, and the key under the sensor (-1 without
+    a locator)."""
+    achieved = observation["achieved_goal"]
+    pose = info["sensor_pose_mm"]
+    pressed = int(achieved.argmax()) if achieved.any() else -1
+    return LabelledTaps.label(pose, pressed, locate(pose) if locate is not None else -1)
 
 
 def fit_touch_encoder(

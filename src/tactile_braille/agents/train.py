@@ -40,6 +40,7 @@ from tactile_braille.agents.touch import (
     TouchEncoderConfig,
     feature_space,
     fit_touch_encoder,
+    observation_label,
 )
 
 
@@ -328,12 +329,7 @@ def train(
         buffer.set_encoder(agent.touch.encode, agent.touch.features_size)
 
     def label(observation: dict[str, np.ndarray], info: dict) -> np.ndarray | None:
-        if not touch:
-            return None
-        achieved = observation["achieved_goal"]
-        pose = info["sensor_pose_mm"]
-        pressed = int(achieved.argmax()) if achieved.any() else -1
-        return LabelledTaps.label(pose, pressed, locate(pose) if locate is not None else -1)
+        return observation_label(observation, info, locate) if touch else None
 
     def fit_touch() -> None:
         """Fit (or refit, from the current weights) the touch encoder on every labelled frame so far."""
