@@ -8,6 +8,7 @@ docs/results.md.
 
     python benchmarks/fast_ablation.py --task DiscreteAlphabet-v0 --algo dqn --seeds 0
     python benchmarks/fast_ablation.py --variants fast no-refits --seeds 0 1 2
+    python benchmarks/fast_ablation.py --task ContinuousAlphabet-v0 --algo sac --variants no-goal-positions
 
 Variants (``fast`` with one change each; ``paper+all`` is the paper's preset
 with only the relabelling of every transition added, on images):
@@ -30,6 +31,9 @@ VARIANTS = {
     "refit-500": ("fast", {"touch_refit_every": 500, "touch_refits": 8}),
     "paper-relabel": ("fast", {"relabel": "paper"}),
     "paper+all": ("paper", {"relabel": "all"}),
+    # The continuous alphabet's additions: placed goals, asymmetric critics.
+    "no-goal-positions": ("fast", {"goal_positions": False}),
+    "session-3-fast": ("fast", {"goal_positions": False, "agent": {"critic_pose": False}}),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
                    VARIANTS.items())  # fmt: skip

@@ -61,6 +61,21 @@ def network_options(observation_space: gym.spaces.Dict, config) -> tuple[dict, d
     return actor, {**actor, "layer_norm": bool(getattr(config, "layer_norm", False))}
 
 
+POSE_SIZE = 3
+"""Length of the privileged pose an asymmetric critic sees: sensor x, y and tap depth."""
+
+
+def critic_poses(batch: dict[str, torch.Tensor], wanted: bool) -> tuple[tuple, tuple]:
+    """``((poses,), (next_poses,))`` of a batch for asymmetric critics, ``((), ())`` otherwise."""
+    if not wanted:
+        return (), ()
+    if "poses" not in batch or "next_poses" not in batch:
+        raise ValueError(
+            "critic_pose needs batches with 'poses' and 'next_poses' (a replay made with poses=True)"
+        )
+    return (batch["poses"],), (batch["next_poses"],)
+
+
 def adam(parameters, learning_rate: float) -> torch.optim.Adam:
     """Adam, fused when the parameters' device supports it (CPU and CUDA do in PyTorch >= 2.4)."""
     parameters = list(parameters)

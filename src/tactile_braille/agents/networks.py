@@ -182,7 +182,11 @@ class PolicyNetwork(nn.Module):
 
 
 class ContinuousQNetwork(nn.Module):
-    """Q(s, g, a) of a continuous action: the action joins the goal after the encoder."""
+    """Q(s, g, a) of a continuous action: the action joins the goal after the encoder.
+
+    ``pose_size`` > 0 makes it an *asymmetric* critic: it also takes a privileged
+    state vector (the sensor pose), which the actor never sees.
+    """
 
     def __init__(
         self,
@@ -191,16 +195,25 @@ class ContinuousQNetwork(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        pose_size: int = 0,
         **options,
     ) -> None:
         super().__init__()
-        vector_size = goal_size + previous_action_size + action_size
+        if pose_size < 0:
+            raise ValueError(f"pose_size must be at least 0, got {pose_size}")
+        vector_size = goal_size + previous_action_size + action_size + pose_size
         self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
         self.q = _small_head(self.trunk.features, 1)
+        self.pose_size = pose_size
 
-    def forward(self, images, goals, previous_actions, actions) -> torch.Tensor:
-        """Q-values, shape (B,)."""
-        return self.q(self.trunk(images, goals, previous_actions, actions)).squeeze(-1).float()
+    def forward(self, images, goals, previous_actions, actions, poses=None) -> torch.Tensor:
+        """Q-values, shape (B,); ``poses`` (B, pose_size) for an asymmetric critic, else None."""
+        if (poses is None) != (self.pose_size == 0):
+            raise ValueError(f"this critic takes poses of size {self.pose_size}, got {poses is not None}")
+        vectors = (
+            (goals, previous_actions, actions) if poses is None else (goals, previous_actions, actions, poses)
+        )
+        return self.q(self.trunk(images, *vectors)).squeeze(-1).float()
 
 
 class GaussianPolicy(nn.Module):

@@ -65,6 +65,11 @@ def fast_settings(kind: str, keys: str, algo: str) -> dict[str, Any]:
     if (kind, keys) == ("Continuous", "Alphabet"):
         # Reading a letter at any offset takes many more taps than at key centres: refit all along.
         settings.update({"touch_refit_every": 1000, "touch_refits": 20})
+        # The critics also see the sensor pose the arm reports: judging a move is easy from where the
+        # sensor is, and the actor, which acts on touch alone, learns from that judgement.
+        settings["agent.critic_pose"] = True
+        # The goal is given where it lies on the calibrated layout, in the encoder's pose coordinates.
+        settings["goal_positions"] = True
     if algo == "dqn":
         settings["agent.epsilon_decay_steps"] = 1000
     if algo in ("sac", "sac_discrete"):

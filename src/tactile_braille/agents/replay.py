@@ -71,6 +71,8 @@ class EpisodeReplayBuffer:
             a sampled transition takes its episode's pressed key, or a random goal.
         observation_shape: ``(100, 100, 1)`` for images (bit-packed), ``(n,)``
             for feature vectors.
+        poses: batches also carry the labelled sensor poses (x, y, depth in mm) of
+            both frames, ``poses`` and ``next_poses``, for asymmetric critics.
     """
 
     def __init__(
@@ -85,6 +87,7 @@ class EpisodeReplayBuffer:
         relabel_final: float = 0.4,
         relabel_random: float = 0.4,
         observation_shape: tuple[int, ...] = (100, 100, 1),
+        poses: bool = False,
     ) -> None:
         if capacity < 1:
             raise ValueError(f"capacity must be at least 1, got {capacity}")
@@ -101,6 +104,7 @@ class EpisodeReplayBuffer:
         if not self.images and len(observation_shape) != 1:
             raise ValueError(f"observations must be 100x100x1 images or vectors, got {observation_shape}")
         self.capacity = int(capacity)
+        self.poses = bool(poses)
         self.her = her
         self.relabel = relabel
         self.relabel_final, self.relabel_random = float(relabel_final), float(relabel_random)
@@ -232,7 +236,7 @@ class EpisodeReplayBuffer:
         if self.her and self.relabel == "all":
             goals, rewards = self._relabel(index, rng)
         observations = self._images if self.features is None else self.features.__getitem__
-        return {
+        batch = {
             "images": observations(frames[:, 0]),
             "previous_actions": self.previous_actions[index, 0],
             "goals": goals,
@@ -242,6 +246,12 @@ class EpisodeReplayBuffer:
             "next_previous_actions": self.previous_actions[index, 1],
             "dones": self.dones[index],
         }
+        if self.poses:
+            poses = self.frame_labels[frames, :3]  # (B, 2, 3)
+            if np.isnan(poses).any():
+                raise RuntimeError("poses=True needs labelled frames, but a sampled frame has no labels")
+            batch["poses"], batch["next_poses"] = poses[:, 0], poses[:, 1]
+        return batch
 
     def _relabel(self, index: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """Goals and rewards of sampled transitions under ``relabel="all"``."""

@@ -19,7 +19,15 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
+from tactile_braille.agents.common import (
+    POSE_SIZE,
+    Agent,
+    adam,
+    check_hyperparameters,
+    critic_poses,
+    network_options,
+    spaces_sizes,
+)
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     GaussianPolicy,
@@ -47,6 +55,8 @@ class SACConfig:
         layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
         shared_encoder: the actor reuses the first critic's encoder, detached
             (not the paper's setting; as in SAC-AE and DrQ).
+        critic_pose: asymmetric critics that also see the sensor pose (batches then carry
+            ``poses`` and ``next_poses``); the actor still acts on touch alone.
     """
 
     gamma: float = 0.95
@@ -59,6 +69,7 @@ class SACConfig:
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
     shared_encoder: bool = False
+    critic_pose: bool = False
 
     def __post_init__(self) -> None:
         check_hyperparameters(self)
@@ -93,9 +104,10 @@ class SACAgent(Agent):
         self.config = config = config or SACConfig()
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
         actor_options, critic_options = network_options(observation_space, config)
-        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
-            self.device
-        )
+        pose_size = POSE_SIZE if config.critic_pose else 0
+        self.critics = nn.ModuleList(
+            [ContinuousQNetwork(*sizes, pose_size=pose_size, **critic_options) for _ in range(2)]
+        ).to(self.device)
         shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
         self.actor = GaussianPolicy(*sizes, encoder=shared, **actor_options).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
@@ -125,13 +137,18 @@ class SACAgent(Agent):
         alpha = self.log_alpha.exp().detach()
         state = (t["images"], t["goals"], t["previous_actions"])
         next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+        poses, next_poses = critic_poses(t, self.config.critic_pose)
         with self.autocast():
             with torch.no_grad():
                 next_actions, next_log_probs, _ = self.actor(*next_state)
-                next_q = torch.min(*(target(*next_state, next_actions) for target in self.targets))
+                next_q = torch.min(
+                    *(target(*next_state, next_actions, *next_poses) for target in self.targets)
+                )
                 next_value = next_q - alpha * next_log_probs
                 target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
-            critic_loss = sum(F.mse_loss(critic(*state, t["actions"]), target) for critic in self.critics)
+            critic_loss = sum(
+                F.mse_loss(critic(*state, t["actions"], *poses), target) for critic in self.critics
+            )
         self.critic_optimiser.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_optimiser.step()
@@ -139,7 +156,7 @@ class SACAgent(Agent):
         self.critics.requires_grad_(False)  # the actor's loss moves the actor only
         with self.autocast():
             actions, log_probs, _ = self.actor(*state)
-            q = torch.min(*(critic(*state, actions) for critic in self.critics))
+            q = torch.min(*(critic(*state, actions, *poses) for critic in self.critics))
             actor_loss = (alpha * log_probs - q).mean()
         self.actor_optimiser.zero_grad(set_to_none=True)
         actor_loss.backward()

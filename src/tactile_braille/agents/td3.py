@@ -18,7 +18,15 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
+from tactile_braille.agents.common import (
+    POSE_SIZE,
+    Agent,
+    adam,
+    check_hyperparameters,
+    critic_poses,
+    network_options,
+    spaces_sizes,
+)
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     DeterministicPolicy,
@@ -47,6 +55,7 @@ class TD3Config:
         hidden: units of the dense layers.
         layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
         shared_encoder: the actor reuses the first critic's encoder, detached (not the paper's).
+        critic_pose: asymmetric critics that also see the sensor pose (as SAC's).
     """
 
     gamma: float = 0.95
@@ -63,6 +72,7 @@ class TD3Config:
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
     shared_encoder: bool = False
+    critic_pose: bool = False
 
     def __post_init__(self) -> None:
         check_hyperparameters(self)
@@ -100,9 +110,10 @@ class TD3Agent(Agent):
             raise ValueError(f"policy_delay must be at least 1, got {config.policy_delay}")
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
         actor_options, critic_options = network_options(observation_space, config)
-        self.critics = nn.ModuleList([ContinuousQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
-            self.device
-        )
+        pose_size = POSE_SIZE if config.critic_pose else 0
+        self.critics = nn.ModuleList(
+            [ContinuousQNetwork(*sizes, pose_size=pose_size, **critic_options) for _ in range(2)]
+        ).to(self.device)
         shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
         self.actor = DeterministicPolicy(*sizes, encoder=shared, **actor_options).to(self.device)
         self.critic_targets = copy.deepcopy(self.critics).requires_grad_(False)
@@ -144,15 +155,18 @@ class TD3Agent(Agent):
         t = self.tensors(batch)
         state = (t["images"], t["goals"], t["previous_actions"])
         next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+        poses, next_poses = critic_poses(t, config.critic_pose)
         with self.autocast():
             with torch.no_grad():
                 smoothing = (torch.randn_like(t["actions"]) * config.target_noise).clamp(
                     -config.noise_clip, config.noise_clip
                 )
                 next_actions = (self.actor_target(*next_state) + smoothing).clamp(-1.0, 1.0)
-                next_q = torch.min(*(target(*next_state, next_actions) for target in self.critic_targets))
+                next_q = torch.min(
+                    *(target(*next_state, next_actions, *next_poses) for target in self.critic_targets)
+                )
                 target = t["rewards"] + config.gamma * (1.0 - t["dones"]) * next_q
-            q_values = [critic(*state, t["actions"]) for critic in self.critics]
+            q_values = [critic(*state, t["actions"], *poses) for critic in self.critics]
             critic_loss = sum(F.mse_loss(q, target) for q in q_values)
         self.critic_optimiser.zero_grad(set_to_none=True)
         critic_loss.backward()
@@ -163,7 +177,7 @@ class TD3Agent(Agent):
         if int(self.critic_updates) % config.policy_delay == 0:
             self.critics.requires_grad_(False)
             with self.autocast():
-                actor_loss = -self.critics[0](*state, self.actor(*state)).mean()
+                actor_loss = -self.critics[0](*state, self.actor(*state), *poses).mean()
             self.actor_optimiser.zero_grad(set_to_none=True)
             actor_loss.backward()
             self.actor_optimiser.step()

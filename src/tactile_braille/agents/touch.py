@@ -281,24 +281,58 @@ class TouchAgent:
     its ``update`` takes replay batches of features. The encoder is part of
     its state and of its policy snapshots.
 
+    With ``key_positions_mm`` (the goal keys' centres on the calibrated
+    layout, keyboard frame) the goal one-hot is followed by the goal key's
+    x and y, standardised as the encoder's pose targets: the goal then lives
+    in the coordinates of the pose the features encode, so "where to go" is
+    the same function for every key, not 27 functions to learn apart.
+
     Args:
         agent: an agent built for feature observations (:func:`feature_space`).
         encoder: the touch encoder (fitted later by the training loop, or loaded).
+        key_positions_mm: (keys, 2) goal key centres, or None for the one-hot alone.
     """
 
-    def __init__(self, agent, encoder: TouchEncoder) -> None:
+    def __init__(self, agent, encoder: TouchEncoder, key_positions_mm: np.ndarray | None = None) -> None:
         self.agent, self.touch = agent, encoder.to(agent.device).eval().requires_grad_(False)
         self.device, self.config, self.precision = agent.device, agent.config, agent.precision
         self.fitted = False
+        self.key_positions_mm = None
+        if key_positions_mm is not None:
+            positions = np.asarray(key_positions_mm, dtype=np.float32)
+            if positions.shape != (encoder.keys, 2) or not np.isfinite(positions).all():
+                raise ValueError(
+                    f"key_positions_mm must be finite, one (x, y) per goal key {(encoder.keys, 2)}, "
+                    f"got shape {positions.shape}"
+                )
+            self.key_positions_mm = positions
+
+    def goals(self, goals: np.ndarray) -> np.ndarray:
+        """Goal one-hots (..., keys), followed by the goal key's standardised position if known."""
+        if self.key_positions_mm is None:
+            return goals
+        mean, scale = self.touch.pose_mean.cpu().numpy()[:2], self.touch.pose_scale.cpu().numpy()[:2]
+        positions = (self.key_positions_mm - mean) / scale
+        return np.concatenate([goals, (goals @ positions).astype(np.float32)], axis=-1)  # zeros: no goal
 
     def features(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The observation with its image replaced by the encoder's features."""
-        return {**observation, "observation": self.touch.encode(observation["observation"][None])[0]}
+        """The observation with its image replaced by the encoder's features (and its goal placed)."""
+        return {
+            **observation,
+            "observation": self.touch.encode(observation["observation"][None])[0],
+            "desired_goal": self.goals(np.asarray(observation["desired_goal"], dtype=np.float32)),
+        }
 
     def policy_action(self, observation: dict, *args, **kwargs):
         return self.agent.policy_action(self.features(observation), *args, **kwargs)
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        """An update of the wrapped agent; poses in the batch are standardised as the encoder's targets."""
+        batch = {**batch, "goals": self.goals(batch["goals"])}
+        if "poses" in batch:
+            mean, scale = self.touch.pose_mean.cpu().numpy(), self.touch.pose_scale.cpu().numpy()
+            batch["poses"] = (batch["poses"] - mean) / scale
+            batch["next_poses"] = (batch["next_poses"] - mean) / scale
         return self.agent.update(batch)
 
     def fit(self, encoder: TouchEncoder) -> None:
@@ -326,8 +360,14 @@ class TouchAgent:
         self.touch.load_state_dict(state["touch"])
 
 
-def feature_space(observation_space: gym.spaces.Dict, features: int) -> gym.spaces.Dict:
-    """The observation space with the image replaced by ``features`` float32 features."""
+def feature_space(
+    observation_space: gym.spaces.Dict, features: int, goal_positions: bool = False
+) -> gym.spaces.Dict:
+    """The observation space with the image replaced by ``features`` float32 features (and, with
+    ``goal_positions``, the goal one-hot followed by the goal key's standardised x and y)."""
     spaces = dict(observation_space.spaces)
     spaces["observation"] = gym.spaces.Box(-np.inf, np.inf, (features,), dtype=np.float32)
+    if goal_positions:
+        keys = observation_space["desired_goal"].shape[0]
+        spaces["desired_goal"] = gym.spaces.Box(-np.inf, np.inf, (keys + 2,), dtype=np.float32)
     return gym.spaces.Dict(spaces)

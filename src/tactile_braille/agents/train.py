@@ -90,6 +90,8 @@ class TrainConfig:
             knows), fit a touch encoder on the labelled frames after ``start_steps`` and learn on
             its features (:mod:`~tactile_braille.agents.touch`); not the paper's.
         touch_epochs: passes of the touch encoder's first fit over those taps.
+        goal_positions: with ``touch_encoder``, the agent also sees where its goal key lies on the
+            calibrated layout, in the coordinates of the pose the encoder learns (:class:`TouchAgent`).
         touch_refits: refits of the touch encoder on all labelled frames so far, every
             ``touch_refit_every`` steps after the first fit (each as many gradient steps as the first fit).
         touch_refit_every: environment steps between refits (None: ``start_steps``).
@@ -120,6 +122,7 @@ class TrainConfig:
     relabel: str = "paper"
     touch_encoder: bool = False
     touch_epochs: int = 40
+    goal_positions: bool = False
     touch_refits: int = 0
     touch_refit_every: int | None = None
     test_episodes: int = 20
@@ -166,6 +169,16 @@ class TrainConfig:
         if self.touch_encoder and self.start_steps < 10:
             raise ValueError(
                 f"a touch encoder learns from the start steps: need at least 10, got {self.start_steps}"
+            )
+        if getattr(self.agent, "critic_pose", False) and not self.touch_encoder:
+            raise ValueError(
+                "critic_pose (asymmetric critics) learns from the labelled frames of a touch-encoder run: "
+                "set touch_encoder too"
+            )
+        if self.goal_positions and not (self.touch_encoder and braille):
+            raise ValueError(
+                "goal_positions places the goal keys in the touch encoder's pose coordinates: it needs "
+                f"touch_encoder and a braille task (a keyboard layout), got {self.task}"
             )
         if self.touch_refit_every is not None and self.touch_refit_every < 1:
             raise ValueError(f"touch_refit_every must be at least 1, got {self.touch_refit_every}")
@@ -225,9 +238,13 @@ def make_agent(config: TrainConfig, env: gym.Env):
         )
     keys = env.observation_space["desired_goal"].shape[0]
     encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden)
-    space = feature_space(env.observation_space, encoder.features_size)
+    positions = None
+    if config.goal_positions:
+        layout = env.unwrapped.layout
+        positions = np.array([layout.centre_mm(key) for key in env.unwrapped.goal_keys])
+    space = feature_space(env.observation_space, encoder.features_size, goal_positions=positions is not None)
     agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
-    return TouchAgent(agent, encoder)
+    return TouchAgent(agent, encoder, key_positions_mm=positions)
 
 
 def evaluate(agent, env: gym.Env, episodes: int, seed: int) -> dict[str, float]:
@@ -310,6 +327,7 @@ def train(
         her=config.her,
         max_episode_steps=max(getattr(env.spec, "max_episode_steps", None) or 0, 100),
         relabel=config.relabel,
+        poses=getattr(config.agent, "critic_pose", False),
     )
     # A touch-encoder run labels every frame with what the robot knows (pose, pressed key, key under
     # the sensor) and fits its encoder on the labelled frames at the fit steps.
