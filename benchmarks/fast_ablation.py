@@ -8,7 +8,7 @@ docs/results.md.
 
     python benchmarks/fast_ablation.py --task DiscreteAlphabet-v0 --algo dqn --seeds 0
     python benchmarks/fast_ablation.py --variants fast no-refits --seeds 0 1 2
-    python benchmarks/fast_ablation.py --task ContinuousAlphabet-v0 --algo sac --variants no-goal-positions
+    python benchmarks/fast_ablation.py --task ContinuousAlphabet-v0 --algo sac --variants latent
 
 Variants (``fast`` with one change each; ``paper+all`` is the paper's preset
 with only the relabelling of every transition added, on images):
@@ -31,9 +31,14 @@ VARIANTS = {
     "refit-500": ("fast", {"touch_refit_every": 500, "touch_refits": 8}),
     "paper-relabel": ("fast", {"relabel": "paper"}),
     "paper+all": ("paper", {"relabel": "all"}),
-    # The continuous alphabet's additions: placed goals, asymmetric critics.
-    "no-goal-positions": ("fast", {"goal_positions": False}),
-    "session-3-fast": ("fast", {"goal_positions": False, "agent": {"critic_pose": False}}),
+    # The continuous alphabet's additions, taken away one after another: the readout, the placed
+    # goals, the asymmetric critics (what is left is the fast preset of session 3).
+    "latent": ("fast", {"touch_inputs": "features"}),
+    "latent-no-goal-positions": ("fast", {"touch_inputs": "features", "goal_positions": False}),
+    "session-3-fast": (
+        "fast",
+        {"touch_inputs": "features", "goal_positions": False, "agent": {"critic_pose": False}},
+    ),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
                    VARIANTS.items())  # fmt: skip

@@ -245,13 +245,14 @@ def test_a_touch_run_trains_asymmetric_critics_on_the_labelled_poses(env_dataset
     assert agent.agent.config.critic_pose and agent.agent.critics[0].pose_size == POSE_SIZE
 
 
-def test_the_fast_preset_gives_asymmetric_critics_and_placed_goals_to_the_continuous_alphabet_only():
+def test_the_fast_preset_gives_its_continuous_alphabet_additions_to_that_task_only():
     for algo in ("sac", "td3"):
         config = preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", algo)
-        assert config.agent.critic_pose and config.goal_positions
+        assert config.agent.critic_pose and config.goal_positions and config.touch_inputs == "readout"
     for preset, task in (("fast", TASK), ("paper", "tactile_braille/ContinuousAlphabet-v0")):
         config = preset_config(preset, task, "sac")
         assert not config.agent.critic_pose and not config.goal_positions
+        assert config.touch_inputs == "features"
 
 
 # ---------------------------------------------------------------- goals placed on the layout
@@ -310,3 +311,53 @@ def test_a_run_with_placed_goals_acts_on_env_observations_and_learns_on_placed_g
     assert agent.policy_action(observation, 0, explore=False, rng=np.random.default_rng(0)).shape == (
         ACTIONS,
     )
+
+
+# ---------------------------------------------------------------- learning on the encoder's readout
+def test_the_readout_is_the_standardised_pose_and_two_key_distributions():
+    torch.manual_seed(0)
+    encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8).eval()
+    images = np.random.default_rng(0).integers(0, 2, (5, 100, 100, 1), dtype=np.uint8) * 255
+    readout = encoder.read(images)
+    assert readout.shape == (5, encoder.readout_size) and encoder.readout_size == 3 + 2 * (GOALS + 1)
+    with torch.no_grad():
+        pose, pressed, under = encoder.heads(torch.as_tensor(np.moveaxis(images, -1, 1)))
+    np.testing.assert_allclose(readout[:, :3], pose.numpy(), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        readout[:, 3 : 3 + GOALS + 1], pressed.softmax(-1).numpy(), rtol=1e-5, atol=1e-6
+    )
+    np.testing.assert_allclose(readout[:, 3 + GOALS + 1 :], under.softmax(-1).numpy(), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(readout[:, 3:].reshape(5, 2, GOALS + 1).sum(-1), 1.0, rtol=1e-5)
+
+
+def test_a_touch_agent_on_the_readout_encodes_with_the_heads():
+    encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8)
+    space = feature_space(feature_observation_space(), encoder.readout_size)
+    agent = TouchAgent(SACAgent(space, ACTION_SPACE, SACConfig(hidden=(8,))), encoder, inputs="readout")
+    images = np.zeros((2, 100, 100, 1), np.uint8)
+    assert agent.input_size == encoder.readout_size
+    np.testing.assert_array_equal(agent.encode(images), encoder.read(images))
+    with pytest.raises(ValueError, match="inputs must be one of"):
+        TouchAgent(agent.agent, encoder, inputs="pixels")
+
+
+def test_a_run_on_the_readout_learns_and_acts_on_it(env_datasets, tmp_path):
+    config = TrainConfig(
+        task=TASK, algo="sac", epochs=1, steps_per_epoch=30, start_steps=12, test_episodes=2,
+        replay_capacity=200, threads=1, dataset=str(env_datasets[TASK]), touch_encoder=True,
+        touch_epochs=2, snapshots=1, touch_inputs="readout", agent=SACConfig(hidden=(16,), batch_size=8),
+    )  # fmt: skip
+    run = train_module.train(config, run_dir=tmp_path / "run", progress=False)
+    _, env, agent = load_run(run)
+    assert agent.inputs == "readout" and agent.agent.actor.trunk.dense[0].in_features == (
+        agent.touch.readout_size + GOALS + PREVIOUS
+    )
+    observation, _ = env.reset(seed=0)
+    np.testing.assert_array_equal(
+        agent.features(observation)["observation"], agent.touch.read(observation["observation"][None])[0]
+    )
+    assert agent.policy_action(observation, 0, explore=False, rng=np.random.default_rng(0)).shape == (
+        ACTIONS,
+    )
+    with pytest.raises(ValueError, match="touch_inputs must be one of"):
+        config.with_changes(touch_inputs="pixels")

@@ -70,6 +70,9 @@ def fast_settings(kind: str, keys: str, algo: str) -> dict[str, Any]:
         settings["agent.critic_pose"] = True
         # The goal is given where it lies on the calibrated layout, in the encoder's pose coordinates.
         settings["goal_positions"] = True
+        # The agent learns on what the encoder reads (pose, key probabilities), which keeps its meaning
+        # across the 20 refits, where latent features changed theirs and cost test return at each refit.
+        settings["touch_inputs"] = "readout"
     if algo == "dqn":
         settings["agent.epsilon_decay_steps"] = 1000
     if algo in ("sac", "sac_discrete"):

@@ -106,14 +106,32 @@ class TouchEncoder(nn.Module):
         features = self.features(images)
         return self.pose(features), self.key(features), self.under(features)
 
+    @property
+    def readout_size(self) -> int:
+        """Length of :meth:`read`'s vectors: the pose and two key distributions."""
+        return 3 + 2 * (self.keys + 1)
+
     @torch.no_grad()
     def encode(self, images: np.ndarray) -> np.ndarray:
         """Features of uint8 images ((B, 1, 100, 100) or (B, 100, 100, 1)) as float32 (B, features)."""
+        return self.features(self._tensor(images)).float().cpu().numpy()
+
+    @torch.no_grad()
+    def read(self, images: np.ndarray) -> np.ndarray:
+        """What the heads read from images, float32 (B, :attr:`readout_size`): the standardised pose,
+        then the probabilities of the pressed key and of the key under the sensor.
+
+        Unlike the features, whose meaning a refit is free to change, each number keeps its meaning
+        from one fit to the next: a learner on the readout keeps what it learnt when the encoder improves.
+        """
+        pose, pressed, under = self.heads(self._tensor(images))
+        return torch.cat([pose, pressed.softmax(-1), under.softmax(-1)], -1).float().cpu().numpy()
+
+    def _tensor(self, images: np.ndarray) -> torch.Tensor:
         images = np.asarray(images)
         if images.ndim == 4 and images.shape[-1] == 1:
             images = np.moveaxis(images, -1, 1)
-        device = self.pose_mean.device
-        return self.features(torch.as_tensor(images, device=device)).float().cpu().numpy()
+        return torch.as_tensor(images, device=self.pose_mean.device)
 
 
 class KeyLocator:
@@ -288,15 +306,28 @@ class TouchAgent:
     the same function for every key, not 27 functions to learn apart.
 
     Args:
-        agent: an agent built for feature observations (:func:`feature_space`).
+        agent: an agent built for feature observations (:func:`feature_space`, of
+            :func:`touch_input_size` features).
         encoder: the touch encoder (fitted later by the training loop, or loaded).
         key_positions_mm: (keys, 2) goal key centres, or None for the one-hot alone.
+        inputs: what the agent learns on: the encoder's ``"features"`` or its ``"readout"``
+            (:meth:`TouchEncoder.read`).
     """
 
-    def __init__(self, agent, encoder: TouchEncoder, key_positions_mm: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        agent,
+        encoder: TouchEncoder,
+        key_positions_mm: np.ndarray | None = None,
+        inputs: str = "features",
+    ) -> None:
+        if inputs not in TOUCH_INPUTS:
+            raise ValueError(f"inputs must be one of {TOUCH_INPUTS}, got {inputs!r}")
         self.agent, self.touch = agent, encoder.to(agent.device).eval().requires_grad_(False)
         self.device, self.config, self.precision = agent.device, agent.config, agent.precision
         self.fitted = False
+        self.inputs = inputs
+        self.input_size = touch_input_size(encoder, inputs)
         self.key_positions_mm = None
         if key_positions_mm is not None:
             positions = np.asarray(key_positions_mm, dtype=np.float32)
@@ -315,11 +346,15 @@ class TouchAgent:
         positions = (self.key_positions_mm - mean) / scale
         return np.concatenate([goals, (goals @ positions).astype(np.float32)], axis=-1)  # zeros: no goal
 
+    def encode(self, images: np.ndarray) -> np.ndarray:
+        """What the agent learns on, of a batch of images: the encoder's features or its readout."""
+        return self.touch.encode(images) if self.inputs == "features" else self.touch.read(images)
+
     def features(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The observation with its image replaced by the encoder's features (and its goal placed)."""
+        """The observation with its image replaced by :meth:`encode`'s vector (and its goal placed)."""
         return {
             **observation,
-            "observation": self.touch.encode(observation["observation"][None])[0],
+            "observation": self.encode(observation["observation"][None])[0],
             "desired_goal": self.goals(np.asarray(observation["desired_goal"], dtype=np.float32)),
         }
 
@@ -358,6 +393,14 @@ class TouchAgent:
             raise ValueError("policy snapshot lacks the touch encoder of a touch-encoder run")
         self.agent.load_policy_state_dict({k: v for k, v in state.items() if k != "touch"})
         self.touch.load_state_dict(state["touch"])
+
+
+TOUCH_INPUTS = ("features", "readout")
+
+
+def touch_input_size(encoder: TouchEncoder, inputs: str) -> int:
+    """Length of the vectors a :class:`TouchAgent` with these ``inputs`` learns on."""
+    return encoder.features_size if inputs == "features" else encoder.readout_size
 
 
 def feature_space(

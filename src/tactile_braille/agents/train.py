@@ -33,6 +33,7 @@ from tactile_braille.agents.sac import SACAgent, SACConfig
 from tactile_braille.agents.sac_discrete import DiscreteSACAgent, DiscreteSACConfig
 from tactile_braille.agents.td3 import TD3Agent, TD3Config
 from tactile_braille.agents.touch import (
+    TOUCH_INPUTS,
     KeyLocator,
     LabelledTaps,
     TouchAgent,
@@ -41,6 +42,7 @@ from tactile_braille.agents.touch import (
     feature_space,
     fit_touch_encoder,
     observation_label,
+    touch_input_size,
 )
 
 
@@ -90,6 +92,8 @@ class TrainConfig:
             knows), fit a touch encoder on the labelled frames after ``start_steps`` and learn on
             its features (:mod:`~tactile_braille.agents.touch`); not the paper's.
         touch_epochs: passes of the touch encoder's first fit over those taps.
+        touch_inputs: what the agent learns on: the encoder's ``"features"`` or its ``"readout"``
+            (pose and key probabilities, whose meaning survives a refit; :meth:`TouchEncoder.read`).
         goal_positions: with ``touch_encoder``, the agent also sees where its goal key lies on the
             calibrated layout, in the coordinates of the pose the encoder learns (:class:`TouchAgent`).
         touch_refits: refits of the touch encoder on all labelled frames so far, every
@@ -123,6 +127,7 @@ class TrainConfig:
     touch_encoder: bool = False
     touch_epochs: int = 40
     goal_positions: bool = False
+    touch_inputs: str = "features"
     touch_refits: int = 0
     touch_refit_every: int | None = None
     test_episodes: int = 20
@@ -175,6 +180,8 @@ class TrainConfig:
                 "critic_pose (asymmetric critics) learns from the labelled frames of a touch-encoder run: "
                 "set touch_encoder too"
             )
+        if self.touch_inputs not in TOUCH_INPUTS:
+            raise ValueError(f"touch_inputs must be one of {TOUCH_INPUTS}, got {self.touch_inputs!r}")
         if self.goal_positions and not (self.touch_encoder and braille):
             raise ValueError(
                 "goal_positions places the goal keys in the touch encoder's pose coordinates: it needs "
@@ -242,9 +249,10 @@ def make_agent(config: TrainConfig, env: gym.Env):
     if config.goal_positions:
         layout = env.unwrapped.layout
         positions = np.array([layout.centre_mm(key) for key in env.unwrapped.goal_keys])
-    space = feature_space(env.observation_space, encoder.features_size, goal_positions=positions is not None)
+    size = touch_input_size(encoder, config.touch_inputs)
+    space = feature_space(env.observation_space, size, goal_positions=positions is not None)
     agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
-    return TouchAgent(agent, encoder, key_positions_mm=positions)
+    return TouchAgent(agent, encoder, key_positions_mm=positions, inputs=config.touch_inputs)
 
 
 def evaluate(agent, env: gym.Env, episodes: int, seed: int) -> dict[str, float]:
@@ -344,7 +352,7 @@ def train(
         start_epoch, env_steps, updates = state["epoch"] + 1, state["env_steps"], state["updates"]
         buffer.load(run_dir / state["replay"])
     if touch and agent.fitted:
-        buffer.set_encoder(agent.touch.encode, agent.touch.features_size)
+        buffer.set_encoder(agent.encode, agent.input_size)
 
     def label(observation: dict[str, np.ndarray], info: dict) -> np.ndarray | None:
         return observation_label(observation, info, locate) if touch else None
@@ -362,7 +370,7 @@ def train(
             init=None if first else agent.touch,
         )  # fmt: skip
         agent.fit(encoder)
-        buffer.set_encoder(agent.touch.encode, agent.touch.features_size)
+        buffer.set_encoder(agent.encode, agent.input_size)
         path = run_dir / "touch.json"
         fits = json.loads(path.read_text())["fits"] if path.exists() else []
         fits = [

@@ -1,0 +1,58 @@
+"""What a touch encoder's refits do to the test return of a run.
+
+For each run, compares the change of the test return over the epochs in which
+the encoder was refitted with the change over the other epochs (after the
+start steps). A learner on the encoder's latent features loses ground at a
+refit, whose new weights give the features new meanings; a learner on its
+readout (``touch_inputs="readout"``) does not.
+
+    python benchmarks/refit_dips.py runs/fast/ContinuousAlphabet__sac__* runs/ablation/ContinuousAlphabet__*
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from tactile_braille.agents.train import TrainConfig, read_progress, touch_fit_steps
+
+
+def refit_changes(run: Path) -> tuple[list[float], list[float]] | None:
+    """Test-return changes over the refit epochs and over the other epochs, or None without refits."""
+    config = TrainConfig.from_json(json.loads((run / "config.json").read_text()))
+    if not config.touch_encoder:
+        return None
+    returns = [row["test/episodic_return"] for row in read_progress(run)]
+    # The test after epoch i (0-based) follows step (i + 1) * steps_per_epoch; a fit at step s
+    # ends the epoch s / steps_per_epoch - 1, before its test.
+    first, *refits = touch_fit_steps(config)
+    refit_epochs = {s // config.steps_per_epoch - 1 for s in refits}
+    start = first // config.steps_per_epoch + 1
+    at_refits = [returns[i] - returns[i - 1] for i in range(start, len(returns)) if i in refit_epochs]
+    others = [returns[i] - returns[i - 1] for i in range(start, len(returns)) if i not in refit_epochs]
+    return (at_refits, others) if at_refits else None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=Path)
+    args = parser.parse_args()
+    print("| run | inputs | refits | mean change at a refit | drops | mean change otherwise |")
+    print("|---|---|---|---|---|---|")
+    for run in args.runs:
+        changes = refit_changes(run)
+        if changes is None:
+            continue
+        at_refits, others = changes
+        inputs = json.loads((run / "config.json").read_text()).get("touch_inputs", "features")
+        print(
+            f"| {run.name} | {inputs} | {len(at_refits)} | {np.mean(at_refits):+.3f} | "
+            f"{sum(change < 0 for change in at_refits)} | {np.mean(others):+.3f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
