@@ -39,6 +39,11 @@ VARIANTS = {
         "fast",
         {"touch_inputs": "features", "goal_positions": False, "agent": {"critic_pose": False}},
     ),
+    # The same additions on the continuous arrows, which the preset leaves without them.
+    "alphabet-additions": (
+        "fast",
+        {"touch_inputs": "readout", "goal_positions": True, "agent": {"critic_pose": True}},
+    ),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
                    VARIANTS.items())  # fmt: skip
