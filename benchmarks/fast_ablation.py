@@ -23,7 +23,7 @@ import numpy as np
 
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.report import convergence_epoch
-from tactile_braille.agents.train import read_progress, train
+from tactile_braille.agents.train import read_progress, setting_differences, train
 
 VARIANTS = {
     "fast": ("fast", {}),
@@ -72,6 +72,10 @@ def main() -> None:
             run = args.root / f"{args.task.split('-')[0]}__{args.algo}__{name}__{seed}"
             config = preset_config(preset, task, args.algo, seed=seed, epochs=epochs, threads=1, **changes)
             if (run / "checkpoint.pt").exists():
+                differing = setting_differences(run, config)
+                if differing:
+                    raise SystemExit(f"{run} holds a run with other settings ({', '.join(differing)}): "
+                                     "remove it, or pass another --root")  # fmt: skip
                 train(run_dir=run, resume=True, progress=False)
             else:
                 train(config, run_dir=run, progress=False)

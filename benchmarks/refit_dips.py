@@ -26,14 +26,15 @@ def refit_changes(run: Path) -> tuple[list[float], list[float]] | None:
     if not config.touch_encoder:
         return None
     returns = [row["test/episodic_return"] for row in read_progress(run)]
-    # The test after epoch i (0-based) follows step (i + 1) * steps_per_epoch; a fit at step s
-    # ends the epoch s / steps_per_epoch - 1, before its test.
+    # The test after epoch i (0-based) follows step (i + 1) * steps_per_epoch; a fit after step s
+    # (1-based) falls in epoch (s - 1) // steps_per_epoch, before its test. The changes start from the
+    # epoch after the first fit's.
     first, *refits = touch_fit_steps(config)
-    refit_epochs = {s // config.steps_per_epoch - 1 for s in refits}
-    start = first // config.steps_per_epoch + 1
+    refit_epochs = {(s - 1) // config.steps_per_epoch for s in refits}
+    start = (first - 1) // config.steps_per_epoch + 2
     at_refits = [returns[i] - returns[i - 1] for i in range(start, len(returns)) if i in refit_epochs]
     others = [returns[i] - returns[i - 1] for i in range(start, len(returns)) if i not in refit_epochs]
-    return (at_refits, others) if at_refits else None
+    return (at_refits, others) if at_refits and others else None
 
 
 def main() -> None:
@@ -47,7 +48,7 @@ def main() -> None:
         if changes is None:
             continue
         at_refits, others = changes
-        inputs = json.loads((run / "config.json").read_text()).get("touch_inputs", "features")
+        inputs = TrainConfig.from_json(json.loads((run / "config.json").read_text())).touch_inputs
         print(
             f"| {run.name} | {inputs} | {len(at_refits)} | {np.mean(at_refits):+.3f} | "
             f"{sum(change < 0 for change in at_refits)} | {np.mean(others):+.3f} |"

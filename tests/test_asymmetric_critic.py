@@ -10,6 +10,7 @@ encoder's pose statistics.
 from __future__ import annotations
 
 import importlib
+import json
 
 import gymnasium as gym
 import numpy as np
@@ -361,3 +362,70 @@ def test_a_run_on_the_readout_learns_and_acts_on_it(env_datasets, tmp_path):
     )
     with pytest.raises(ValueError, match="touch_inputs must be one of"):
         config.with_changes(touch_inputs="pixels")
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_targets_see_the_next_poses_and_the_critics_and_the_actors_loss_the_poses(algo):
+    agent = make(algo, True, policy_delay=1) if algo == "td3" else make(algo, True)
+    targets = agent.critic_targets if algo == "td3" else agent.targets
+    seen: dict[str, list[torch.Tensor]] = {"online": [], "target": []}
+
+    def hook(kind):
+        return lambda module, inputs: seen[kind].append(inputs[-1].detach().clone())
+
+    for critic in agent.critics:
+        critic.register_forward_pre_hook(hook("online"))
+    for target in targets:
+        target.register_forward_pre_hook(hook("target"))
+    data = batch(np.random.default_rng(0))
+    data["dones"] = np.zeros_like(data["dones"])  # the targets' values count
+    agent.update(data)
+    poses, next_poses = torch.as_tensor(data["poses"]), torch.as_tensor(data["next_poses"])
+    assert seen["target"] and all(torch.equal(p, next_poses) for p in seen["target"])
+    # Both critics' losses and the actor's loss (the first critic, or both for SAC's minimum).
+    assert len(seen["online"]) >= 3 and all(torch.equal(p, poses) for p in seen["online"])
+
+
+def test_a_run_with_every_addition_resumes_on_its_readout(env_datasets, tmp_path):
+    sizes = []
+    original = EpisodeReplayBuffer.set_encoder
+
+    def recording_set_encoder(self, encode, size, *args, **kwargs):
+        sizes.append(size)
+        return original(self, encode, size, *args, **kwargs)
+
+    config = TrainConfig(
+        task=TASK, algo="sac", epochs=2, steps_per_epoch=20, start_steps=12, test_episodes=1,
+        replay_capacity=200, threads=1, dataset=str(env_datasets[TASK]), touch_encoder=True,
+        touch_epochs=2, touch_refits=1, touch_refit_every=20, snapshots=1, goal_positions=True,
+        touch_inputs="readout", agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
+    )  # fmt: skip
+    run = tmp_path / "run"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(EpisodeReplayBuffer, "set_encoder", recording_set_encoder)
+        train_module.train(config, run_dir=run, progress=False)
+        before = torch.load(run / "checkpoint.pt", weights_only=False)["agent"]
+        stored = json.loads((run / "config.json").read_text())
+        stored["epochs"] = 3
+        (run / "config.json").write_text(json.dumps(stored))
+        train_module.train(run_dir=run, resume=True, progress=False)
+    readout = TouchEncoder(GOALS).readout_size
+    assert sizes == [readout] * len(sizes) and len(sizes) == 3  # the first fit, the refit, the resume
+    assert [row["epoch"] for row in train_module.read_progress(run)] == [0, 1, 2]
+    assert train_module.setting_differences(run, config) == []
+    _, _, agent = load_run(run)
+    after = agent.state_dict()
+    assert not torch.equal(before["critics"]["0.q.weight"], after["critics"]["0.q.weight"])  # it learnt on
+    assert agent.inputs == "readout" and agent.key_positions_mm is not None and agent.agent.config.critic_pose
+
+
+def test_a_run_from_before_these_settings_compares_with_their_defaults(env_datasets, tmp_path):
+    config = TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch_encoder=True)
+    old = json.loads(json.dumps(config.to_json()))
+    for key in ("goal_positions", "touch_inputs"):
+        del old[key]
+    del old["agent"]["critic_pose"]
+    (tmp_path / "config.json").write_text(json.dumps({**old, "epochs": 99}))
+    assert train_module.setting_differences(tmp_path, config) == []  # epochs may differ
+    changed = config.with_changes(goal_positions=True, touch_inputs="readout", agent={"critic_pose": True})
+    assert train_module.setting_differences(tmp_path, changed) == ["agent", "goal_positions", "touch_inputs"]

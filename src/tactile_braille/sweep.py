@@ -24,7 +24,7 @@ from typing import Any
 
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.presets import preset_config
-from tactile_braille.agents.train import AGENTS, train
+from tactile_braille.agents.train import AGENTS, setting_differences, train
 
 PAPER_SIM_RUNS = (
     ("DiscreteArrows-v0", "dqn"), ("DiscreteArrows-v0", "sac_discrete"),
@@ -83,13 +83,13 @@ def run_trial(trial: Trial, root: str | Path, progress: bool = False) -> Path:
     run_dir = Path(root) / trial.name
     config_file = run_dir / "config.json"
     if config_file.exists():
-        stored, wanted = json.loads(config_file.read_text()), json.loads(json.dumps(trial.config().to_json()))
-        differing = sorted(key for key in wanted if key != "epochs" and stored.get(key) != wanted[key])
+        stored, wanted = json.loads(config_file.read_text()), trial.config()
+        differing = setting_differences(run_dir, wanted)
         if differing:
             raise ValueError(f"{run_dir} holds a run with other settings ({', '.join(differing)}); "
                              "use another --root")  # fmt: skip
-        if wanted["epochs"] > stored["epochs"]:
-            stored["epochs"] = wanted["epochs"]
+        if wanted.epochs > stored["epochs"]:
+            stored["epochs"] = wanted.epochs
             with atomic_path(config_file) as temporary:
                 temporary.write_text(json.dumps(stored, indent=2))
         return train(run_dir=run_dir, resume=True, progress=progress)

@@ -208,8 +208,10 @@ class ContinuousQNetwork(nn.Module):
 
     def forward(self, images, goals, previous_actions, actions, poses=None) -> torch.Tensor:
         """Q-values, shape (B,); ``poses`` (B, pose_size) for an asymmetric critic, else None."""
-        if (poses is None) != (self.pose_size == 0):
-            raise ValueError(f"this critic takes poses of size {self.pose_size}, got {poses is not None}")
+        if poses is None and self.pose_size:
+            raise ValueError(f"this asymmetric critic needs poses of size {self.pose_size}, got none")
+        if poses is not None and not self.pose_size:
+            raise ValueError("this critic takes no poses (pose_size=0), but was given some")
         vectors = (
             (goals, previous_actions, actions) if poses is None else (goals, previous_actions, actions, poses)
         )

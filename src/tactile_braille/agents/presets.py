@@ -6,7 +6,9 @@ with the original runs (``reference/braille_rl_2020/.../config.json``). The
 differences are listed in ``docs/agents.md`` and in :data:`DIFFERENCES`.
 ``fast`` is ours (docs/agents.md, "Beyond the paper"): a touch encoder
 fitted and refitted on the run's own labelled taps, relabelling of every
-transition for every goal, and more, cheaper updates on the encoder's features.
+transition for every goal, and more, cheaper updates on the encoder's features;
+on the continuous alphabet also asymmetric critics that see the sensor pose,
+goals placed on the calibrated layout, and learning on the encoder's readout.
 
 >>> config = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn")
 >>> config.epochs, config.updates_per_step, config.agent.gamma

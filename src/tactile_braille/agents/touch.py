@@ -106,6 +106,13 @@ class TouchEncoder(nn.Module):
         features = self.features(images)
         return self.pose(features), self.key(features), self.under(features)
 
+    def standardise(self, poses_mm: np.ndarray) -> np.ndarray:
+        """Poses in mm, (..., 3) or (..., 2) for x and y, in the pose head's standardised coordinates
+        (the labels' mean and spread at the last fit)."""
+        size = np.shape(poses_mm)[-1]
+        mean, scale = self.pose_mean.cpu().numpy()[:size], self.pose_scale.cpu().numpy()[:size]
+        return ((poses_mm - mean) / scale).astype(np.float32)
+
     @property
     def readout_size(self) -> int:
         """Length of :meth:`read`'s vectors: the pose and two key distributions."""
@@ -123,6 +130,9 @@ class TouchEncoder(nn.Module):
 
         Unlike the features, whose meaning a refit is free to change, each number keeps its meaning
         from one fit to the next: a learner on the readout keeps what it learnt when the encoder improves.
+        The pose's standardisation is the labels' mean and spread at the last fit, which settles as
+        taps accumulate (in a continuous-alphabet run, it moves by about 1 % of the spread from one
+        refit to the next after the first 5,000 taps).
         """
         pose, pressed, under = self.heads(self._tensor(images))
         return torch.cat([pose, pressed.softmax(-1), under.softmax(-1)], -1).float().cpu().numpy()
@@ -331,19 +341,20 @@ class TouchAgent:
         self.key_positions_mm = None
         if key_positions_mm is not None:
             positions = np.asarray(key_positions_mm, dtype=np.float32)
-            if positions.shape != (encoder.keys, 2) or not np.isfinite(positions).all():
+            if positions.shape != (encoder.keys, 2):
                 raise ValueError(
-                    f"key_positions_mm must be finite, one (x, y) per goal key {(encoder.keys, 2)}, "
-                    f"got shape {positions.shape}"
+                    f"key_positions_mm needs one (x, y) per goal key, shape {(encoder.keys, 2)}, "
+                    f"got {positions.shape}"
                 )
+            if not np.isfinite(positions).all():
+                raise ValueError(f"key_positions_mm must be finite, got {positions.tolist()}")
             self.key_positions_mm = positions
 
     def goals(self, goals: np.ndarray) -> np.ndarray:
         """Goal one-hots (..., keys), followed by the goal key's standardised position if known."""
         if self.key_positions_mm is None:
             return goals
-        mean, scale = self.touch.pose_mean.cpu().numpy()[:2], self.touch.pose_scale.cpu().numpy()[:2]
-        positions = (self.key_positions_mm - mean) / scale
+        positions = self.touch.standardise(self.key_positions_mm)
         return np.concatenate([goals, (goals @ positions).astype(np.float32)], axis=-1)  # zeros: no goal
 
     def encode(self, images: np.ndarray) -> np.ndarray:
@@ -365,9 +376,8 @@ class TouchAgent:
         """An update of the wrapped agent; poses in the batch are standardised as the encoder's targets."""
         batch = {**batch, "goals": self.goals(batch["goals"])}
         if "poses" in batch:
-            mean, scale = self.touch.pose_mean.cpu().numpy(), self.touch.pose_scale.cpu().numpy()
-            batch["poses"] = (batch["poses"] - mean) / scale
-            batch["next_poses"] = (batch["next_poses"] - mean) / scale
+            batch["poses"] = self.touch.standardise(batch["poses"])
+            batch["next_poses"] = self.touch.standardise(batch["next_poses"])
         return self.agent.update(batch)
 
     def fit(self, encoder: TouchEncoder) -> None:

@@ -182,11 +182,17 @@ class TrainConfig:
             )
         if self.touch_inputs not in TOUCH_INPUTS:
             raise ValueError(f"touch_inputs must be one of {TOUCH_INPUTS}, got {self.touch_inputs!r}")
-        if self.goal_positions and not (self.touch_encoder and braille):
+        if self.touch_inputs != "features" and not self.touch_encoder:
             raise ValueError(
-                "goal_positions places the goal keys in the touch encoder's pose coordinates: it needs "
-                f"touch_encoder and a braille task (a keyboard layout), got {self.task}"
+                f"touch_inputs={self.touch_inputs!r} reads a touch encoder: set touch_encoder too"
             )
+        if self.goal_positions and not self.touch_encoder:
+            raise ValueError(
+                "goal_positions places the goal keys in the touch encoder's pose coordinates: "
+                "set touch_encoder too"
+            )
+        if self.goal_positions and not braille:
+            raise ValueError(f"goal_positions needs a braille task (a keyboard layout), got {self.task}")
         if self.touch_refit_every is not None and self.touch_refit_every < 1:
             raise ValueError(f"touch_refit_every must be at least 1, got {self.touch_refit_every}")
         if self.touch_refits < 0:
@@ -492,6 +498,18 @@ def _save_checkpoint(run_dir: Path, agent, buffer, rng, epoch: int, env_steps: i
     for old in run_dir.glob("replay.*.npz"):
         if old.name != replay:
             old.unlink()
+
+
+def setting_differences(run_dir: str | Path, config: TrainConfig) -> list[str]:
+    """The settings, epochs aside, in which the run in ``run_dir`` differs from ``config``.
+
+    The stored config.json is read through :class:`TrainConfig`, so a run written before a setting
+    existed compares with that setting's default (the behaviour it was trained with).
+    """
+    stored = TrainConfig.from_json(json.loads((Path(run_dir) / "config.json").read_text()))
+    stored = json.loads(json.dumps(stored.to_json()))
+    wanted = json.loads(json.dumps(config.to_json()))
+    return sorted(key for key in wanted if key != "epochs" and stored.get(key) != wanted[key])
 
 
 def read_progress(run_dir: str | Path) -> list[dict[str, float]]:
