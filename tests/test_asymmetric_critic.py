@@ -102,9 +102,9 @@ def test_an_asymmetric_critic_takes_poses_and_a_plain_one_refuses_them():
     assert asymmetric(*inputs, poses).shape == (5,) and plain(*inputs).shape == (5,)
     torch.nn.init.normal_(asymmetric.q.weight)  # away from the near-zero start, so the pose shows
     assert not torch.allclose(asymmetric(*inputs, poses), asymmetric(*inputs, poses + 1.0))
-    with pytest.raises(ValueError, match="takes poses of size 3"):
+    with pytest.raises(ValueError, match="needs poses of size 3, got none"):
         asymmetric(*inputs)
-    with pytest.raises(ValueError, match="takes poses of size 0"):
+    with pytest.raises(ValueError, match="takes no poses"):
         plain(*inputs, poses)
     with pytest.raises(ValueError, match="pose_size must be at least 0"):
         ContinuousQNetwork(*sizes, pose_size=-1, features=FEATURES)
@@ -285,8 +285,10 @@ def test_a_placed_goal_is_the_one_hot_followed_by_the_keys_standardised_position
 
 
 def test_goal_positions_need_a_touch_encoder_and_a_keyboard(env_datasets):
-    with pytest.raises(ValueError, match="needs touch_encoder"):
+    with pytest.raises(ValueError, match=r"goal_positions places the goal keys .* set touch_encoder too"):
         TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), goal_positions=True)
+    with pytest.raises(ValueError, match="touch_inputs='readout' reads a touch encoder"):
+        TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch_inputs="readout")
     with pytest.raises(ValueError, match="a keyboard layout"):
         TrainConfig(task="toys/BitFlipPress-v0", algo="dqn", touch_encoder=True, goal_positions=True)
 
