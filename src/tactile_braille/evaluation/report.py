@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import textwrap
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -254,7 +255,8 @@ def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str |
                     label="original release (sim, seed 1)")  # fmt: skip
         paper = PAPER_TABLE.get(("sim", task, algo))
         title = f"{task}, {_label(algo, variant)}"
-        ax.set_title(title + (f" (paper: converged at epoch {paper[2]})" if paper else ""), fontsize=9)
+        title += f" (paper: converged at epoch {paper[2]})" if paper else ""
+        ax.set_title(textwrap.fill(title, 70), fontsize=9)  # ablations' titles name their settings
         ax.set_xlabel("epoch (250 steps)")
         ax.set_ylabel("test return")
         ax.set_ylim(-0.05, 1.05)
