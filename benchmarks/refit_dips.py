@@ -20,9 +20,8 @@ import numpy as np
 from tactile_braille.agents.train import TrainConfig, read_progress, touch_fit_steps
 
 
-def refit_changes(run: Path) -> tuple[list[float], list[float]] | None:
+def refit_changes(run: Path, config: TrainConfig) -> tuple[list[float], list[float]] | None:
     """Test-return changes over the refit epochs and over the other epochs, or None without refits."""
-    config = TrainConfig.from_json(json.loads((run / "config.json").read_text()))
     if not config.touch_encoder:
         return None
     returns = [row["test/episodic_return"] for row in read_progress(run)]
@@ -44,13 +43,13 @@ def main() -> None:
     print("| run | inputs | refits | mean change at a refit | drops | mean change otherwise |")
     print("|---|---|---|---|---|---|")
     for run in args.runs:
-        changes = refit_changes(run)
+        config = TrainConfig.from_json(json.loads((run / "config.json").read_text()))
+        changes = refit_changes(run, config)
         if changes is None:
             continue
         at_refits, others = changes
-        inputs = TrainConfig.from_json(json.loads((run / "config.json").read_text())).touch_inputs
         print(
-            f"| {run.name} | {inputs} | {len(at_refits)} | {np.mean(at_refits):+.3f} | "
+            f"| {run.name} | {config.touch_inputs} | {len(at_refits)} | {np.mean(at_refits):+.3f} | "
             f"{sum(change < 0 for change in at_refits)} | {np.mean(others):+.3f} |"
         )
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+import torch
 
 from tactile_braille.datasets import GridTaps, PerturbedTaps, collect
 from tactile_braille.keyboard.layout import KeyboardLayout
@@ -40,6 +41,15 @@ def tactip() -> TacTip:
 
 
 # ------------------------------------------------------------------ environments
+@pytest.fixture
+def one_torch_thread():
+    """Torch on one thread for the test (learning tests stay comparable on a busy machine)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 @pytest.fixture(scope="module", autouse=True)
 def _cache_in_tmp(tmp_path_factory):
     """Point the default-dataset cache at a session-wide temporary folder while a module runs."""

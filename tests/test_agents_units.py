@@ -56,12 +56,7 @@ ACTOR_CRITICS = ("sac_discrete", "sac", "td3")
 HIDDEN = (16,)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

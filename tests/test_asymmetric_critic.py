@@ -32,12 +32,7 @@ TASK = "tactile_braille/ContinuousArrows-v0"
 FEATURES, GOALS, PREVIOUS, ACTIONS = 6, 4, 3, 3
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def feature_observation_space() -> gym.spaces.Dict:

@@ -69,12 +69,7 @@ FRAMES = STEPS + len(EPISODES)  # each episode's first observation and one per s
 WRONG_PRESS_STEPS = sum(steps for goal, steps, end in EPISODES if isinstance(end, int) and end != goal)
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 # ---------------------------------------------------------------- replay helpers

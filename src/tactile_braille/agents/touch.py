@@ -131,7 +131,7 @@ class TouchEncoder(nn.Module):
         Unlike the features, whose meaning a refit is free to change, each number keeps its meaning
         from one fit to the next: a learner on the readout keeps what it learnt when the encoder improves.
         The pose's standardisation is the labels' mean and spread at the last fit, which settles as
-        taps accumulate (in a continuous-alphabet run, it moves by about 1 % of the spread from one
+        taps accumulate (in a continuous-alphabet run, it moves by about 1-1.5 % of the spread from one
         refit to the next after the first 5,000 taps).
         """
         pose, pressed, under = self.heads(self._tensor(images))
