@@ -3,7 +3,9 @@
 For each map of the original release (alphabet grid, arrows grid) prints the
 overall agreement (fraction of taps with the same outcome, NONE included) and
 the agreement on the taps where the robot or the model actuated a key, beside
-the never-press baseline; writes a PNG with the real and the modelled maps
+the never-press baseline; for a map whose keys carry fitted travel offsets,
+also the same figures with offsets fitted on half the map's taps and scored
+on the other half (two-fold cross-validation); writes a PNG with the real and the modelled maps
 side by side at each depth. Targets: >= 97 % overall and >= 85 % on actuated
 taps for each map.
 
@@ -25,10 +27,12 @@ from tactile_braille.keyboard.calibration import (
     MAP_NAMES,
     RIG_TAP_OFFSET_MM,
     agreement,
+    held_out_agreement,
     load_activation_map,
     predict_activation_map,
 )
 from tactile_braille.keyboard.layout import NONE_KEY, key_set
+from tactile_braille.keyboard.switch import SwitchModel
 
 
 def main() -> None:
@@ -52,6 +56,13 @@ def main() -> None:
             f"{name:8s} actuated-tap agreement {result.actuated:6.1%} "
             f"(never-press {never.actuated:5.1%}, target 85%)  [{result.taps} taps]"
         )
+        offset_keys = {key for key, _ in SwitchModel().travel_offsets_mm}
+        if offset_keys & set(key_set(name)):
+            held_out = held_out_agreement(activation_map)
+            print(
+                f"{name:8s} held-out agreement, per-key offsets fitted on the other half: "
+                f"{held_out.overall:6.1%} overall, {held_out.actuated:6.1%} actuated"
+            )
         for row, (labels, what) in enumerate(((activation_map.pressed, "robot"), (predicted, "model"))):
             draw_activation_map(
                 axes[2 * index + row],

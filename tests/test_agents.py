@@ -201,6 +201,45 @@ def test_discrete_sac_trains_checkpoints_and_resumes(env_datasets, tmp_path):
     assert [int(r["epoch"]) for r in read_progress(run)] == [0, 1]
 
 
+def test_a_run_records_its_world_and_resumes_only_in_it(env_datasets, tmp_path):
+    from tactile_braille.datasets import GENERATOR_VERSION
+    from tactile_braille.evaluation.report import load_records
+    from tactile_braille.keyboard.switch import SwitchModel
+
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+    config = TrainConfig(
+        epochs=1, steps_per_epoch=40, start_steps=20, updates_per_step=1, test_episodes=2,
+        replay_capacity=500, dataset=dataset, threads=1,
+    )  # fmt: skip
+    run = train(config, run_dir=tmp_path / "run", progress=False)
+    world = json.loads((run / "world.json").read_text())
+    assert world["backend"] == "dataset" and world["dataset"] == dataset
+    assert world["generator_version"] == GENERATOR_VERSION
+    assert SwitchModel(**world["keyboard"]["switch"]) == SwitchModel()
+    (record,) = load_records([run], evaluate_missing=False)
+    assert "world" not in record.variant  # the present world goes without saying
+
+    # A resume in another world is refused before anything changes.
+    data = json.loads((run / "config.json").read_text())
+    data["epochs"] = 2
+    (run / "config.json").write_text(json.dumps(data))
+    (run / "world.json").write_text(json.dumps({**world, "generator_version": "0.0.1+samples1"}))
+    progress = (run / "progress.csv").read_text()
+    with pytest.raises(ValueError, match=r"another world.*generator_version"):
+        train(run_dir=run, resume=True, progress=False)
+    assert (run / "progress.csv").read_text() == progress
+    (record,) = load_records([run], evaluate_missing=False)
+    assert "world 0.0.1+samples1" in record.variant
+
+    # A run from before worlds were recorded resumes without a record being invented for it.
+    (run / "world.json").unlink()
+    (record,) = load_records([run], evaluate_missing=False)
+    assert "earlier world" in record.variant
+    train(run_dir=run, resume=True, progress=False)
+    assert [int(r["epoch"]) for r in read_progress(run)] == [0, 1]
+    assert not (run / "world.json").exists()
+
+
 def test_agent_config_must_match_the_algorithm():
     from tactile_braille.agents import DQNConfig
 

@@ -12,13 +12,17 @@ from tactile_braille.keyboard.calibration import (
     CALIBRATED_FRAMES,
     MAP_NAMES,
     RIG_TAP_OFFSET_MM,
+    ActivationMap,
     Agreement,
     FrameTransform,
     agreement,
+    fit_travel_offsets,
+    held_out_agreement,
     load_activation_map,
     predict_activation_map,
 )
 from tactile_braille.keyboard.layout import NONE_KEY, key_set
+from tactile_braille.keyboard.switch import SwitchModel
 
 EXPECTED_TAPS = {"alphabet": 8967, "arrows": 11193}
 
@@ -150,9 +154,66 @@ def test_calibrated_model_reproduces_the_real_maps(maps, predictions, name):
     result = agreement(maps[name].pressed, predictions[name])
     baseline = agreement(maps[name].pressed, np.full(len(maps[name]), NONE_KEY))
     assert result.taps == EXPECTED_TAPS[name]
-    assert result.overall >= 0.96
-    assert result.actuated >= 0.8
+    assert result.overall >= 0.97  # the issue's targets
+    assert result.actuated >= 0.85
     assert result.overall > baseline.overall + 0.07
+
+
+def test_per_key_offsets_lift_the_alphabet_on_taps_they_were_not_fitted_on(maps):
+    """Two-fold cross-validation: offsets fitted on one half of the taps predict the other half."""
+    level = agreement(
+        maps["alphabet"].pressed,
+        predict_activation_map(maps["alphabet"], SwitchModel(travel_offsets_mm=())),
+    )
+    held_out = held_out_agreement(maps["alphabet"])
+    assert level.actuated < 0.85 <= held_out.actuated
+    assert held_out.overall > level.overall
+
+
+def _synthetic_map(activation_map, switch):
+    """The real map's taps, labelled by ``switch`` instead of the robot."""
+    return ActivationMap(
+        name=activation_map.name,
+        x_mm=activation_map.x_mm,
+        y_mm=activation_map.y_mm,
+        depth_mm=activation_map.depth_mm,
+        pressed=predict_activation_map(activation_map, switch),
+    )
+
+
+def test_fit_travel_offsets_recovers_planted_offsets(maps):
+    planted = {"A": 0.3, "K": -0.2, "SPACE": 0.1, "Q": -0.4}
+    truth = _synthetic_map(maps["alphabet"], SwitchModel(travel_offsets_mm=planted))
+    fitted = fit_travel_offsets(truth, SwitchModel(travel_offsets_mm={"B": 0.5}))  # replaced, not added to
+    # a 1 mm depth grid pins an offset down only to the interval that changes no tap outcome
+    predicted = predict_activation_map(truth, SwitchModel(travel_offsets_mm=fitted))
+    assert agreement(truth.pressed, predicted).overall == 1.0
+    assert set(fitted) == set(planted)
+    for key, value in planted.items():
+        assert np.sign(fitted[key]) == np.sign(value)
+
+
+def test_fit_travel_offsets_on_a_level_map_finds_none(maps):
+    truth = _synthetic_map(maps["arrows"], SwitchModel(travel_offsets_mm=()))
+    assert fit_travel_offsets(truth) == {}
+
+
+def test_fit_travel_offsets_uses_only_the_given_taps(maps):
+    truth = _synthetic_map(maps["alphabet"], SwitchModel(travel_offsets_mm={"A": 0.3}))
+    a_taps = np.flatnonzero(truth.pressed == "A")
+    elsewhere = np.setdiff1d(np.arange(len(truth)), np.flatnonzero(np.isin(truth.pressed, ["A"])))
+    level = predict_activation_map(truth, SwitchModel(travel_offsets_mm=()))
+    changed = np.flatnonzero(level != truth.pressed)
+    assert len(changed) and set(truth.pressed[changed]) == {"A"}
+    assert "A" in fit_travel_offsets(truth, taps=np.union1d(a_taps, changed))
+    assert fit_travel_offsets(truth, taps=np.setdiff1d(elsewhere, changed)) == {}
+
+
+def test_fit_and_cross_validation_reject_bad_arguments(maps):
+    with pytest.raises(ValueError, match="step_mm"):
+        fit_travel_offsets(maps["arrows"], step_mm=0.0)
+    with pytest.raises(ValueError, match="folds"):
+        held_out_agreement(maps["arrows"], folds=1)
 
 
 @pytest.mark.parametrize("name", MAP_NAMES)

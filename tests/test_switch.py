@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
+import json
 
 import numpy as np
 import pytest
 
-from tactile_braille.keyboard.layout import ALL_TASK_KEYS
-from tactile_braille.keyboard.switch import SwitchModel
+from tactile_braille.keyboard.layout import ALL_TASK_KEYS, ALPHABET_KEYS
+from tactile_braille.keyboard.switch import FITTED_TRAVEL_OFFSETS_MM, SwitchModel
 
 
 def _pressed(switch, layout, x, y, depth):
@@ -38,16 +40,80 @@ def test_no_press_anywhere_short_of_the_actuation_travel(layout, switch):
     rng = np.random.default_rng(1)
     x = rng.uniform(x_min, x_max, 5000)
     y = rng.uniform(y_min, y_max, 5000)
-    depth = switch.clearance_mm + switch.actuation_travel_mm - 0.05
+    earliest = switch.actuation_travel_mm - switch.travel_offsets(layout).max()
+    depth = switch.clearance_mm + earliest - 0.05
     assert (_pressed(switch, layout, x, y, depth) == -1).all()
     assert (_pressed(switch, layout, x, y, 0.0) == -1).all()
 
 
-def test_centre_press_starts_just_past_actuation_travel(layout, switch):
-    x, y = layout.centre_mm("G")
-    onset = switch.clearance_mm + switch.actuation_travel_mm
+@pytest.mark.parametrize("key", ["G", "Q", "T", "UP"])  # offsets -0.2, +0.25, -0.45 and none
+def test_centre_press_starts_just_past_the_keys_own_travel(layout, switch, key):
+    x, y = layout.centre_mm(key)
+    offset = dict(switch.travel_offsets_mm).get(key, 0.0)
+    onset = switch.clearance_mm + switch.actuation_travel_mm - offset
     assert _pressed(switch, layout, x, y, onset - 0.01) == -1
-    assert _name(layout, _pressed(switch, layout, x, y, onset + 0.01)) == "G"
+    assert _name(layout, _pressed(switch, layout, x, y, onset + 0.01)) == key
+
+
+def test_fitted_offsets_name_alphabet_keys_within_the_switch_tolerance():
+    offsets = dict(FITTED_TRAVEL_OFFSETS_MM)
+    assert offsets, "the calibrated model carries per-key offsets"
+    assert set(offsets) <= set(ALPHABET_KEYS)
+    assert all(0 < abs(value) <= 0.5 for value in offsets.values())
+    assert SwitchModel().travel_offsets_mm == FITTED_TRAVEL_OFFSETS_MM
+
+
+def test_an_offset_moves_only_its_own_key(layout):
+    level = SwitchModel(travel_offsets_mm=())
+    shifted = SwitchModel(travel_offsets_mm={"H": 0.3})
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-10, 50, 2000)
+    y = rng.uniform(-200, 10, 2000)
+    depth = rng.uniform(4.0, 9.0, 2000)
+    before = level.actuation_margin_mm(layout, x, y, depth)
+    after = shifted.actuation_margin_mm(layout, x, y, depth)
+    reachable = np.isfinite(before)
+    assert np.array_equal(reachable, np.isfinite(after))
+    moved = np.zeros(len(layout))
+    moved[layout.key("H").index] = 0.3
+    assert reachable[:, layout.key("H").index].any()
+    assert np.allclose((after - moved)[reachable], before[reachable])
+
+
+def test_offsets_given_as_mapping_or_pairs_are_the_same_model():
+    assert SwitchModel(travel_offsets_mm={"A": 0.1, "B": -0.2}) == SwitchModel(
+        travel_offsets_mm=(("A", 0.1), ("B", -0.2))
+    )
+    # as a JSON round trip of the rig's description gives them back
+    assert SwitchModel(travel_offsets_mm=[["A", 0.1]]).travel_offsets_mm == (("A", 0.1),)
+
+
+def test_switch_rebuilds_from_its_stored_description():
+    switch = SwitchModel()
+    stored = json.loads(json.dumps(dataclasses.asdict(switch)))
+    assert SwitchModel(**stored) == switch
+
+
+@pytest.mark.parametrize(
+    ("offsets", "message"),
+    [
+        ({"A": 0.7}, "within"),
+        ({"A": -0.61}, "within"),
+        ((("A", 0.1), ("A", 0.2)), "twice"),
+        ({"NOT_A_KEY": 0.1}, "does not have"),
+        ("AB", "pairs"),
+        ([("A", "deep")], "pairs"),
+        ({"A": float("nan")}, "within"),
+    ],
+)
+def test_invalid_travel_offsets_raise(offsets, message):
+    with pytest.raises(ValueError, match=message):
+        SwitchModel(travel_offsets_mm=offsets)
+
+
+def test_an_offset_cannot_make_a_key_register_before_it_is_touched():
+    with pytest.raises(ValueError, match="less than actuation_travel_mm"):
+        SwitchModel(actuation_travel_mm=0.3, travel_offsets_mm={"A": 0.4})
 
 
 def test_monotone_in_depth_on_random_positions(layout, switch):

@@ -1,7 +1,9 @@
 """The training loop: epochs of environment steps, replay updates, a test each epoch, checkpoints.
 
 A run lives in ``runs/{task}__{algo}__{seed}__{time}/`` with ``config.json``
-(the resolved settings), ``progress.csv`` (one row per epoch), TensorBoard
+(the resolved settings), ``world.json`` (the dataset or rig it learns from, with
+the generator version and the keyboard's and sensor's parameters: a resume in
+another world is refused), ``progress.csv`` (one row per epoch), TensorBoard
 events (``charts/...``, ``losses/...``, when TensorBoard is installed) and,
 every ``checkpoint_every`` epochs, an atomic checkpoint (``checkpoint.pt``:
 networks, optimisers, counters and generator states; ``replay.{epoch}.npz``:
@@ -305,6 +307,44 @@ def _open_run(
     return config, run_dir
 
 
+WORLD_FILE = "world.json"
+"""Where a run records the world it learns in (:attr:`BrailleEnv.world`)."""
+
+
+def _record_world(run_dir: Path, env: gym.Env, resume: bool) -> None:
+    """Write the run's world, or check that a resumed run continues in the world it started in.
+
+    A run from before worlds were recorded is resumed without a record: what
+    it started in is unknown, and recording the present world would claim it.
+    """
+    world = getattr(env.unwrapped, "world", None)
+    if world is None:  # goal-conditioned toys have no tactile world
+        return
+    path = run_dir / WORLD_FILE
+    if path.exists():
+        stored = json.loads(path.read_text())
+        differ = sorted(
+            key for key in set(stored) | set(world) if key != "dataset" and stored.get(key) != world.get(key)
+        )
+        if differ:
+            raise ValueError(
+                f"{run_dir} was trained in another world than this one (they differ in {', '.join(differ)}: "
+                f"stored generator {stored.get('generator_version')}, now {world.get('generator_version')}); "
+                "start a new run instead of resuming it"
+            )
+        return
+    if resume and (run_dir / "checkpoint.pt").exists():
+        return
+    with atomic_path(path) as temporary:
+        temporary.write_text(json.dumps(world, indent=2, sort_keys=True))
+
+
+def run_world(run_dir: str | Path) -> dict | None:
+    """The world a run recorded, or ``None`` for a run from before worlds were recorded."""
+    path = Path(run_dir) / WORLD_FILE
+    return json.loads(path.read_text()) if path.exists() else None
+
+
 def _tensorboard(run_dir: Path):
     try:
         from torch.utils.tensorboard import SummaryWriter
@@ -324,6 +364,7 @@ def train(
     config, run_dir = _open_run(config, run_dir, resume)
     torch.set_num_threads(config.threads)
     env, test_env = make_env(config, rig), make_env(config, rig)
+    _record_world(run_dir, env, resume)
     torch.manual_seed(config.seed)  # before the networks are made: the seed fixes their initial weights
     agent = make_agent(config, env)
     action_shape = env.action_space.shape if AGENTS[config.algo].continuous else ()  # checked by make_agent

@@ -11,7 +11,7 @@ from tactile_braille.keyboard.layout import NONE_KEY
 from tactile_braille.rigs.base import Rig
 from tactile_braille.sensor.processing import process_frame
 
-GENERATOR_VERSION = f"{__version__}+samples2"
+GENERATOR_VERSION = f"{__version__}+samples3"
 """Version of the sample generator (procedures, rig model, renderer, processing).
 
 Bump the suffix whenever a change alters the samples a collection produces:

@@ -68,6 +68,18 @@ class DatasetBackend:
         else:
             self._index_keys(dataset)
 
+    def describe(self) -> dict:
+        """The world the images come from: the dataset, its generator and its rig's parameters."""
+        metadata = self.dataset.metadata
+        return {
+            "backend": self.name,
+            "dataset": str(self.dataset.path),
+            "generator_version": metadata.generator_version,
+            "rig": metadata.rig,
+            "keyboard": metadata.keyboard,
+            "sensor": metadata.sensor,
+        }
+
     # ---------------------------------------------------------- discrete
     def _index_keys(self, dataset: TactileDataset) -> None:
         if dataset.metadata.procedure.get("procedure") != "perturbed":
@@ -151,6 +163,16 @@ class RigBackend:
             )
         self.rig = rig
         self.layout = rig.layout
+
+    def describe(self) -> dict:
+        """The world the images come from: the rig's own description (and the generator, if simulated)."""
+        from tactile_braille.datasets.collector import GENERATOR_VERSION
+
+        description = self.rig.describe()
+        world = {"backend": self.name, **description}
+        if description.get("rig") == "virtual":
+            world["generator_version"] = GENERATOR_VERSION
+        return world
 
     def _tap(self, x: float, y: float, depth: float, yaw: float, rng: np.random.Generator):
         self.rig.reseed(int(rng.integers(2**63 - 1)))

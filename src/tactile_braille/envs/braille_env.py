@@ -75,6 +75,11 @@ class BrailleEnv(gym.Env):
         return self._core.layout
 
     @property
+    def world(self) -> dict:
+        """Where the observations come from: backend, dataset or rig, and their parameters (JSON-ready)."""
+        return self._core.backend.describe()
+
+    @property
     def goal_keys(self) -> tuple[str, ...]:
         """The task's keys, in the order of the goal one-hots."""
         return self._core.goal_keys

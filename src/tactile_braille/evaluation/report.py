@@ -25,7 +25,8 @@ import numpy as np
 
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.report import convergence_epoch
-from tactile_braille.agents.train import TrainConfig, read_progress
+from tactile_braille.agents.train import TrainConfig, read_progress, run_world
+from tactile_braille.datasets.collector import GENERATOR_VERSION
 
 ALGO_NAMES = {"dqn": "DQN", "sac_discrete": "SAC_DISC", "sac": "SAC", "td3": "TD3"}
 TASK_NAMES = {
@@ -86,6 +87,9 @@ class RunRecord:
     returns: np.ndarray
     typing: dict | None = None
     config: TrainConfig | None = field(default=None, repr=False)
+    world: str | None = GENERATOR_VERSION
+    """The generator version (or the real rig) of the world the run learned in; ``None`` where
+    the run predates ``world.json`` (a world before ``0.1.0+samples3``)."""
 
     @property
     def variant(self) -> str:
@@ -97,6 +101,8 @@ class RunRecord:
             parts.append("no HER")
         if self.config.backend != "dataset":
             parts.append(f"{self.config.backend} backend")
+        if self.world != GENERATOR_VERSION:
+            parts.append("earlier world" if self.world is None else f"world {self.world}")
         return ", ".join(parts + _departures(self.config))
 
     @property
@@ -125,9 +131,11 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
             typing = None  # evaluated before the run went on: stale
         if typing is None and evaluate_missing and (run_dir / "checkpoint.pt").exists():
             typing = evaluate_typing(run_dir)
+        world = run_world(run_dir)
         records.append(RunRecord(
             path=run_dir, task=config.task.split("/")[-1], algo=config.algo, seed=config.seed,
             returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
+            world=None if world is None else world.get("generator_version", world.get("rig")),
         ))  # fmt: skip
     return records
 

@@ -11,6 +11,7 @@ the frame transforms differ (see ``docs/calibration.md`` and
 from __future__ import annotations
 
 import csv
+import dataclasses
 import gzip
 from dataclasses import dataclass
 from importlib import resources
@@ -145,6 +146,28 @@ def load_activation_map(name: str, path: str | Path | None = None) -> Activation
     )
 
 
+def _heard_margins(
+    activation_map: ActivationMap,
+    switch: SwitchModel,
+    frame: FrameTransform,
+    layout: KeyboardLayout,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Actuation margins of the map's heard keys per tap, and those keys' names."""
+    x_kb, y_kb = frame.to_keyboard(activation_map.x_mm, activation_map.y_mm)
+    clearance = frame.clearance_at_mm(activation_map.x_mm, activation_map.y_mm)
+    depth = activation_map.depth_mm - (clearance - switch.clearance_mm)
+    margin = switch.actuation_margin_mm(layout, x_kb, y_kb, depth)
+    names = key_set(activation_map.name)
+    heard = np.array([layout.key(name).index for name in names])
+    return margin[:, heard], np.array(names)
+
+
+def _outcomes(margin: np.ndarray, names: np.ndarray) -> np.ndarray:
+    best = np.argmax(margin, axis=-1)
+    pressed = margin[np.arange(len(best)), best] >= 0
+    return np.where(pressed, names[best], NONE_KEY)
+
+
 def predict_activation_map(
     activation_map: ActivationMap,
     switch: SwitchModel | None = None,
@@ -158,17 +181,80 @@ def predict_activation_map(
     """
     switch = switch or SwitchModel()
     frame = frame or CALIBRATED_FRAMES[activation_map.name]
-    layout = layout or KeyboardLayout()
-    x_kb, y_kb = frame.to_keyboard(activation_map.x_mm, activation_map.y_mm)
-    clearance = frame.clearance_at_mm(activation_map.x_mm, activation_map.y_mm)
-    depth = activation_map.depth_mm - (clearance - switch.clearance_mm)
-    margin = switch.actuation_margin_mm(layout, x_kb, y_kb, depth)
-    heard = np.array([layout.key(name).index for name in key_set(activation_map.name)])
-    margin = margin[:, heard]
-    best = np.argmax(margin, axis=-1)
-    pressed = margin[np.arange(len(best)), best] >= 0
-    names = np.array([layout.keys[i].name for i in heard])
-    return np.where(pressed, names[best], NONE_KEY)
+    return _outcomes(*_heard_margins(activation_map, switch, frame, layout or KeyboardLayout()))
+
+
+def fit_travel_offsets(
+    activation_map: ActivationMap,
+    switch: SwitchModel | None = None,
+    frame: FrameTransform | None = None,
+    taps: np.ndarray | None = None,
+    limit_mm: float = 0.5,
+    step_mm: float = 0.05,
+    sweeps: int = 4,
+) -> dict[str, float]:
+    """Per-key travel offsets that best reproduce a map's outcomes.
+
+    Coordinate search on exact agreement over ``taps`` (indices; all by
+    default): each heard key's offset in turn takes the value of the grid
+    ``-limit_mm .. limit_mm`` (``step_mm`` apart) that matches the most taps,
+    the smallest such value on ties, until a sweep changes nothing. The
+    switch's own offsets are replaced, not added to.
+
+    Returns:
+        The offsets of the keys whose offset is not 0, ``{key name: mm}``.
+    """
+    if not 0 < step_mm <= limit_mm:
+        raise ValueError(f"need 0 < step_mm <= limit_mm, got step {step_mm}, limit {limit_mm}")
+    switch = dataclasses.replace(switch or SwitchModel(), travel_offsets_mm=())
+    frame = frame or CALIBRATED_FRAMES[activation_map.name]
+    margin, names = _heard_margins(activation_map, switch, frame, KeyboardLayout())
+    taps = np.arange(len(activation_map)) if taps is None else np.asarray(taps)
+    margin, observed = margin[taps], activation_map.pressed[taps]
+    grid = np.round(np.arange(-limit_mm, limit_mm + step_mm / 2, step_mm), 6)
+    grid = grid[np.argsort(np.abs(grid), kind="stable")]
+    offsets = np.zeros(len(names))
+    for _ in range(sweeps):
+        changed = False
+        for k in range(len(names)):
+            trial = offsets.copy()
+            scores = []
+            for value in grid:
+                trial[k] = value
+                scores.append(int((_outcomes(margin + trial, names) == observed).sum()))
+            best = float(grid[int(np.argmax(scores))])
+            changed |= best != offsets[k]
+            offsets[k] = best
+        if not changed:
+            break
+    return {str(name): float(value) for name, value in zip(names, offsets, strict=True) if value}
+
+
+def held_out_agreement(
+    activation_map: ActivationMap,
+    switch: SwitchModel | None = None,
+    frame: FrameTransform | None = None,
+    folds: int = 2,
+    seed: int = 0,
+) -> Agreement:
+    """Agreement of per-key offsets on taps they were not fitted on (cross-validation).
+
+    The map's taps are dealt at random into ``folds`` parts; each part is
+    predicted with offsets fitted (:func:`fit_travel_offsets`) on the others,
+    and the pooled predictions are scored against the whole map. Compare with
+    the agreement of the switch without offsets to see what they are worth.
+    """
+    if folds < 2:
+        raise ValueError(f"folds must be at least 2, got {folds}")
+    switch = switch or SwitchModel()
+    frame = frame or CALIBRATED_FRAMES[activation_map.name]
+    fold = np.random.default_rng(seed).permutation(len(activation_map)) % folds
+    predicted = np.empty(len(activation_map), dtype=activation_map.pressed.dtype)
+    for k in range(folds):
+        offsets = fit_travel_offsets(activation_map, switch, frame, taps=np.flatnonzero(fold != k))
+        model = dataclasses.replace(switch, travel_offsets_mm=tuple(offsets.items()))
+        predicted[fold == k] = predict_activation_map(activation_map, model, frame)[fold == k]
+    return agreement(activation_map.pressed, predicted)
 
 
 def agreement(observed: np.ndarray, predicted: np.ndarray) -> Agreement:

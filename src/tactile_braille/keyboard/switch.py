@@ -22,6 +22,11 @@ The model, fitted to the real robot's activation maps
   ``rocking_x * |e_x|^p + rocking_y * |e_y|^p`` for a contact point at
   ``(e_x, e_y)`` from the key centre. Keys wider than 1 u (SPACE) are held
   level by a stabiliser bar over ``stabiliser_fraction`` of their extra width.
+* **Switch tolerance.** Each switch registers at its own pre-travel: Cherry
+  specifies 2.0 +/- 0.6 mm for MX switches. ``travel_offsets_mm`` lowers
+  (positive) or raises (negative) one key's actuation travel; the fit to the
+  alphabet map gives offsets within +/- 0.5 mm. They move the depth at which a
+  key's footprint opens, not its centre or shape.
 * **Actuation.** The key with the largest margin (penetration minus the
   travel required) registers when that margin is non-negative.
 
@@ -33,11 +38,27 @@ rows. The defaults are the joint fit to both of the original release's maps.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from tactile_braille.keyboard.layout import KeyboardLayout
+
+SWITCH_TOLERANCE_MM = 0.6
+"""Pre-travel tolerance of a Cherry MX switch (2.0 +/- 0.6 mm)."""
+
+FITTED_TRAVEL_OFFSETS_MM: tuple[tuple[str, float], ...] = (
+    ("A", -0.35), ("C", -0.4), ("D", -0.45), ("E", -0.3), ("F", 0.1), ("G", -0.2), ("H", -0.15),
+    ("I", 0.05), ("J", 0.05), ("K", -0.3), ("M", 0.1), ("O", 0.25), ("P", 0.15), ("Q", 0.25),
+    ("S", 0.2), ("SPACE", -0.05), ("T", -0.45), ("U", -0.3), ("V", 0.2), ("W", 0.05), ("X", 0.2),
+    ("Y", 0.1), ("Z", 0.05),
+)  # fmt: skip
+"""Per-key travel offsets fitted to the alphabet map (``tools/fit_switch_model.py``).
+
+Positive: the key registers earlier than the shared ``actuation_travel_mm``.
+The arrow keys have none: offsets fitted on half the arrows map made the
+other half worse."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +92,10 @@ class SwitchModel:
             over which its stabiliser keeps it level (no rocking).
         clearance_mm: height of the work frame origin above the key tops
             (3.5 mm on the paper's rig).
+        travel_offsets_mm: ``(key name, offset)`` pairs: each named key
+            registers ``offset`` mm earlier than ``actuation_travel_mm`` says
+            (later where negative), its switch's own pre-travel tolerance.
+            Keys not named have offset 0. At most ``SWITCH_TOLERANCE_MM`` each.
     """
 
     dome_radius_mm: float = 14.45
@@ -85,6 +110,7 @@ class SwitchModel:
     rocking_exponent: float = 0.9912
     stabiliser_fraction: float = 0.0178
     clearance_mm: float = 3.5
+    travel_offsets_mm: tuple[tuple[str, float], ...] = FITTED_TRAVEL_OFFSETS_MM
 
     def __post_init__(self) -> None:
         for name in ("dome_radius_mm", "dome_contact_radius_mm", "actuation_travel_mm"):
@@ -104,6 +130,42 @@ class SwitchModel:
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be non-negative, got {getattr(self, name)!r}")
+        pairs = self.travel_offsets_mm
+        if isinstance(pairs, Mapping):
+            pairs = tuple(pairs.items())
+        try:
+            offsets = {str(name): float(offset) for name, offset in pairs}
+        except (TypeError, ValueError):
+            raise ValueError(
+                "travel_offsets_mm must be a mapping or (key name, offset in mm) pairs, "
+                f"got {self.travel_offsets_mm!r}"
+            ) from None
+        if len(offsets) != len(pairs):
+            raise ValueError("travel_offsets_mm names a key twice")
+        unknown = sorted(set(offsets) - {key.name for key in KeyboardLayout().keys})
+        if unknown:
+            raise ValueError(f"travel_offsets_mm names keys the keyboard does not have: {unknown}")
+        for name, offset in offsets.items():
+            if not abs(offset) <= SWITCH_TOLERANCE_MM:
+                raise ValueError(
+                    f"travel offset of {name} must be within +/- {SWITCH_TOLERANCE_MM} mm "
+                    f"(the switch's pre-travel tolerance), got {offset!r}"
+                )
+            if not offset < self.actuation_travel_mm:
+                raise ValueError(
+                    f"travel offset of {name} ({offset} mm) must be less than actuation_travel_mm "
+                    f"({self.actuation_travel_mm} mm): the key would register before it is touched"
+                )
+        object.__setattr__(self, "travel_offsets_mm", tuple(offsets.items()))
+
+    def travel_offsets(self, layout: KeyboardLayout) -> np.ndarray:
+        """(n_keys,) travel offset of each key of ``layout`` (0 for keys not named)."""
+        offsets = np.zeros(len(layout))
+        for name, offset in self.travel_offsets_mm:
+            if name not in layout:
+                raise ValueError(f"travel_offsets_mm names {name!r}, which is not a key of the layout")
+            offsets[layout.key(name).index] = offset
+        return offsets
 
     def keycap_top_half_size_mm(self, layout: KeyboardLayout) -> np.ndarray:
         """(n_keys, 2) half-sizes (x, y) of each key's flat top."""
@@ -154,6 +216,7 @@ class SwitchModel:
         cos_theta = np.sqrt(1.0 - (np.minimum(r, self.dome_contact_radius_mm) / radius) ** 2)
         required = (
             self.actuation_travel_mm
+            - self.travel_offsets(layout)
             + radius * (1.0 - cos_theta)
             + self.compliance_mm * (1.0 / cos_theta - 1.0)
             + self.rocking_x * contact_x**self.rocking_exponent
