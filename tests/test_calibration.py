@@ -212,6 +212,8 @@ def test_fit_travel_offsets_uses_only_the_given_taps(maps):
 def test_fit_and_cross_validation_reject_bad_arguments(maps):
     with pytest.raises(ValueError, match="step_mm"):
         fit_travel_offsets(maps["arrows"], step_mm=0.0)
+    with pytest.raises(ValueError, match="switch tolerance"):
+        fit_travel_offsets(maps["arrows"], limit_mm=1.0)
     with pytest.raises(ValueError, match="folds"):
         held_out_agreement(maps["arrows"], folds=1)
 

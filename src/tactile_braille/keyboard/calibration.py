@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout, key_set
-from tactile_braille.keyboard.switch import SwitchModel
+from tactile_braille.keyboard.switch import SWITCH_TOLERANCE_MM, SwitchModel
 
 RIG_TAP_OFFSET_MM = 2.0
 """The original rig added this constant to every recorded ``tap_depth``."""
@@ -204,8 +204,11 @@ def fit_travel_offsets(
     Returns:
         The offsets of the keys whose offset is not 0, ``{key name: mm}``.
     """
-    if not 0 < step_mm <= limit_mm:
-        raise ValueError(f"need 0 < step_mm <= limit_mm, got step {step_mm}, limit {limit_mm}")
+    if not 0 < step_mm <= limit_mm <= SWITCH_TOLERANCE_MM:
+        raise ValueError(
+            f"need 0 < step_mm <= limit_mm <= {SWITCH_TOLERANCE_MM} (the switch tolerance), "
+            f"got step {step_mm}, limit {limit_mm}"
+        )
     switch = dataclasses.replace(switch or SwitchModel(), travel_offsets_mm=())
     frame = frame or CALIBRATED_FRAMES[activation_map.name]
     margin, names = _heard_margins(activation_map, switch, frame, KeyboardLayout())
@@ -249,7 +252,7 @@ def held_out_agreement(
     switch = switch or SwitchModel()
     frame = frame or CALIBRATED_FRAMES[activation_map.name]
     fold = np.random.default_rng(seed).permutation(len(activation_map)) % folds
-    predicted = np.empty(len(activation_map), dtype=activation_map.pressed.dtype)
+    predicted = np.full(len(activation_map), NONE_KEY, dtype=object)
     for k in range(folds):
         offsets = fit_travel_offsets(activation_map, switch, frame, taps=np.flatnonzero(fold != k))
         model = dataclasses.replace(switch, travel_offsets_mm=tuple(offsets.items()))
