@@ -38,7 +38,7 @@ def test_tiles_titles_and_images(tiles):
 
 
 def test_default_gallery_covers_all_task_keys_without_pressing_them():
-    assert GALLERY_DEPTH_MM == 5.0
+    assert GALLERY_DEPTH_MM == 4.5
     tiles = live_gallery_tiles(VirtualRig(seed=None))
     titles = [title for title, _, _ in tiles]
     assert titles[: len(ALL_TASK_KEYS)] == list(ALL_TASK_KEYS)  # no "-> KEY" suffix: nothing pressed

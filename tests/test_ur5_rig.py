@@ -82,7 +82,7 @@ def test_taps_press_the_key_under_the_sensor_and_not_at_shallow_depths(rig, worl
     for key in ("Q", "A", "M", "SPACE", "UP", "LEFT"):
         x, y = rig.layout.centre_mm(key)
         assert rig.tap(x, y, 8.0).pressed_key == key
-        assert rig.tap(x, y, 5.0).pressed_key is None  # 1.5 mm into the key top: short of actuation
+        assert rig.tap(x, y, 4.5).pressed_key is None  # 1 mm into the key top: short of actuation
     assert world.pressed_log == ["Q", "A", "M", "SPACE", "UP", "LEFT"]
     # Between taps the sensor is back at the travel height above the last key.
     assert world.sensor_pose().depth_mm == pytest.approx(-rig.config.travel_height_mm)

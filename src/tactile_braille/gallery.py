@@ -12,8 +12,10 @@ from tactile_braille.keyboard.layout import ALL_TASK_KEYS, NONE_KEY
 from tactile_braille.rigs.virtual import VirtualRig
 from tactile_braille.sensor.processing import process_frame
 
-GALLERY_DEPTH_MM = 5.0
-"""Tap depth of the gallery: 1.5 mm into the key tops, short of actuation."""
+GALLERY_DEPTH_MM = 4.5
+"""Tap depth of the gallery: the middle of the paper's reading taps (5 mm + U[-1, 0]),
+1 mm into the key tops and short of every key's actuation (the earliest switches,
+Q and O, register from 4.85 mm at their centres)."""
 
 
 def live_gallery_tiles(

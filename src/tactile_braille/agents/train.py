@@ -320,6 +320,7 @@ def _record_world(run_dir: Path, env: gym.Env, resume: bool) -> None:
     world = getattr(env.unwrapped, "world", None)
     if world is None:  # goal-conditioned toys have no tactile world
         return
+    world = json.loads(json.dumps(world))  # as stored: tuples become lists
     path = run_dir / WORLD_FILE
     if path.exists():
         stored = json.loads(path.read_text())
