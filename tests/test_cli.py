@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from tactile_braille.cli import build_parser, main
+from tactile_braille.gallery import GALLERY_DEPTH_MM
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -24,7 +25,7 @@ def test_show_defaults():
     args = build_parser().parse_args(["show"])
     assert args.output == "outputs/gallery.png"
     assert args.sensor == "braille_331"
-    assert args.depth == 5.0
+    assert args.depth == GALLERY_DEPTH_MM  # reading taps that press no key
     assert args.seed == 0
 
 

@@ -422,7 +422,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     show.add_argument("--output", default="outputs/gallery.png", help="PNG to write")
     show.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
-    show.add_argument("--depth", type=float, default=5.0, help="tap depth in mm (default 5)")
+    show.add_argument(
+        "--depth", type=float, default=4.5, help="tap depth in mm (default 4.5: no key registers)"
+    )
     show.add_argument("--seed", type=int, default=0, help="seed of the sensor nuisances")
     show.set_defaults(handler=_show)
 
