@@ -335,6 +335,8 @@ def write_report(
         run_dirs: the runs' folders.
         output: a folder (``output/results.md`` and the figures in it) or a
             Markdown file (``docs/results.md``: the figures go in ``docs/results/``).
+            Figures of groups no longer reported (``confusion_*.png``,
+            ``trajectories_*.png``) are removed from there.
         title: the report's title.
         notes: Markdown placed after the table (a reading of the results).
         command: the command that made the report, quoted in it.
@@ -350,7 +352,7 @@ def write_report(
     if not groups:
         raise ValueError("no runs to report")
     figures.mkdir(parents=True, exist_ok=True)
-    plot_curves(groups, figures / "curves.png")
+    written = {plot_curves(groups, figures / "curves.png").name}
     lines = [
         f"# {title}", "",
         *([f"`{command}`", ""] if command else []),
@@ -378,11 +380,16 @@ def write_report(
             caption = f"{task}, {_label(algo, variant)}: typing over {len(typed)} seeds"
             path = figures / f"confusion_{name}.png"
             save_typing_confusion(confusion, first["rows"], first["columns"], path, caption)
+            written.add(path.name)
             lines += ["", f"![typing confusion]({link}confusion_{name}.png)"]
         with_snapshots = [r for r in records if (r.path / "snapshots").is_dir()]
         if with_snapshots and plot_trajectories(with_snapshots[0], figures / f"trajectories_{name}.png"):
+            written.add(f"trajectories_{name}.png")
             lines += ["", f"![trajectories]({link}trajectories_{name}.png)"]
         lines.append("")
     with atomic_path(report) as temporary:
         temporary.write_text("\n".join(lines))
+    for stale in [*figures.glob("confusion_*.png"), *figures.glob("trajectories_*.png")]:
+        if stale.name not in written:
+            stale.unlink()
     return report
