@@ -214,6 +214,7 @@ def test_a_run_records_its_world_and_resumes_only_in_it(env_datasets, tmp_path):
     run = train(config, run_dir=tmp_path / "run", progress=False)
     world = json.loads((run / "world.json").read_text())
     assert world["backend"] == "dataset" and world["dataset"] == dataset
+    assert world["procedure"]["procedure"] == "perturbed" and world["seed"] == 0
     assert world["generator_version"] == GENERATOR_VERSION
     assert SwitchModel(**world["keyboard"]["switch"]) == SwitchModel()
     (record,) = load_records([run], evaluate_missing=False)
@@ -223,20 +224,33 @@ def test_a_run_records_its_world_and_resumes_only_in_it(env_datasets, tmp_path):
     data = json.loads((run / "config.json").read_text())
     data["epochs"] = 2
     (run / "config.json").write_text(json.dumps(data))
-    (run / "world.json").write_text(json.dumps({**world, "generator_version": "0.0.1+samples1"}))
     progress = (run / "progress.csv").read_text()
-    with pytest.raises(ValueError, match=r"another world.*generator_version"):
+    other_switch = json.loads(json.dumps(world))
+    other_switch["keyboard"]["switch"]["travel_offsets_mm"] = [["A", 0.3]]
+    (run / "world.json").write_text(json.dumps({**other_switch, "dataset": "/elsewhere/keys.h5"}))
+    refused = r"another world than this one \(keyboard\.switch\.travel_offsets_mm: .* -> "
+    with pytest.raises(ValueError, match=refused):
+        train(run_dir=run, resume=True, progress=False)  # the same generator, another switch
+    (run / "world.json").write_text(json.dumps({**world, "generator_version": "0.0.1+samples1"}))
+    with pytest.raises(ValueError, match=r'generator_version: "0.0.1\+samples1" -> '):
         train(run_dir=run, resume=True, progress=False)
     assert (run / "progress.csv").read_text() == progress
     (record,) = load_records([run], evaluate_missing=False)
     assert "world 0.0.1+samples1" in record.variant
 
+    # The same world with its dataset at another path resumes.
+    (run / "world.json").write_text(json.dumps({**world, "dataset": "/elsewhere/keys.h5"}))
+    train(run_dir=run, resume=True, progress=False)
+    assert [int(r["epoch"]) for r in read_progress(run)] == [0, 1]
+
     # A run from before worlds were recorded resumes without a record being invented for it.
     (run / "world.json").unlink()
     (record,) = load_records([run], evaluate_missing=False)
     assert "earlier world" in record.variant
+    data["epochs"] = 3
+    (run / "config.json").write_text(json.dumps(data))
     train(run_dir=run, resume=True, progress=False)
-    assert [int(r["epoch"]) for r in read_progress(run)] == [0, 1]
+    assert [int(r["epoch"]) for r in read_progress(run)] == [0, 1, 2]
     assert not (run / "world.json").exists()
 
 

@@ -92,14 +92,18 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
             replay_capacity=500, dataset=dataset, threads=1,
         )  # fmt: skip
         runs.append(train(config, run_dir=tmp_path / f"run{seed}", progress=False))
-    # Figures of a group the report no longer holds are removed; other files are left alone.
+    # Figures the previous report linked, of a group this one no longer holds, are removed;
+    # files it did not link are left alone.
     (tmp_path / "report").mkdir()
-    for leftover in ("confusion_DiscreteArrows__dqn__gone.png", "trajectories_gone.png", "notes.txt"):
+    for leftover in ("confusion_gone.png", "trajectories_gone.png", "confusion_not_ours.png", "notes.txt"):
         (tmp_path / "report" / leftover).write_bytes(b"old")
+    (tmp_path / "report" / "results.md").write_text(
+        "![a](confusion_gone.png)\n![b](trajectories_gone.png)\n![c](curves.png)\n"
+    )
     report = write_report(runs, tmp_path / "report", title="Two seeds")
     assert sorted(p.name for p in (tmp_path / "report").iterdir()) == [
-        "confusion_DiscreteArrows__dqn__custom_fp32.png", "curves.png", "notes.txt", "results.md",
-        "trajectories_DiscreteArrows__dqn__custom_fp32.png",
+        "confusion_DiscreteArrows__dqn__custom_fp32.png", "confusion_not_ours.png", "curves.png", "notes.txt",
+        "results.md", "trajectories_DiscreteArrows__dqn__custom_fp32.png",
     ]  # fmt: skip
     text = report.read_text()
     assert text.startswith("# Two seeds")

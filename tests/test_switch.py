@@ -99,7 +99,7 @@ def test_switch_rebuilds_from_its_stored_description():
     [
         ({"A": 0.7}, "within"),
         ({"A": -0.61}, "within"),
-        ((("A", 0.1), ("A", 0.2)), "twice"),
+        ((("A", 0.1), ("A", 0.2)), "names A more than once"),
         ({"NOT_A_KEY": 0.1}, "does not have"),
         ("AB", "pairs"),
         ([("A", "deep")], "pairs"),
@@ -109,6 +109,14 @@ def test_switch_rebuilds_from_its_stored_description():
 def test_invalid_travel_offsets_raise(offsets, message):
     with pytest.raises(ValueError, match=message):
         SwitchModel(travel_offsets_mm=offsets)
+
+
+def test_offsets_have_one_spelling():
+    """Order and explicit zeros do not make another switch (a run's world compares them)."""
+    assert SwitchModel(travel_offsets_mm={"B": -0.2, "A": 0.1, "C": 0.0}) == SwitchModel(
+        travel_offsets_mm=(("A", 0.1), ("B", -0.2))
+    )
+    assert SwitchModel(travel_offsets_mm=(pair for pair in [("A", 0.1)])).travel_offsets_mm == (("A", 0.1),)
 
 
 def test_an_offset_cannot_make_a_key_register_before_it_is_touched():

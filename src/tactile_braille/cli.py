@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_braille.gallery import GALLERY_DEPTH_MM
 from tactile_braille.rigs.base import RigError
 from tactile_braille.sensor.config import PRESETS
 
@@ -423,7 +424,10 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--output", default="outputs/gallery.png", help="PNG to write")
     show.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
     show.add_argument(
-        "--depth", type=float, default=4.5, help="tap depth in mm (default 4.5: no key registers)"
+        "--depth",
+        type=float,
+        default=GALLERY_DEPTH_MM,
+        help=f"tap depth in mm ({GALLERY_DEPTH_MM}: no key registers)",
     )
     show.add_argument("--seed", type=int, default=0, help="seed of the sensor nuisances")
     show.set_defaults(handler=_show)

@@ -15,7 +15,7 @@ from tactile_braille.sensor.processing import process_frame
 GALLERY_DEPTH_MM = 4.5
 """Tap depth of the gallery: the middle of the paper's reading taps (5 mm + U[-1, 0]),
 1 mm into the key tops and short of every key's actuation (the earliest switches,
-Q and O, register from 4.85 mm at their centres)."""
+O and Q, register from 4.85 mm at their centres)."""
 
 
 def live_gallery_tiles(

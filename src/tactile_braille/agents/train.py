@@ -317,20 +317,20 @@ def _record_world(run_dir: Path, env: gym.Env, resume: bool) -> None:
     A run from before worlds were recorded is resumed without a record: what
     it started in is unknown, and recording the present world would claim it.
     """
-    world = getattr(env.unwrapped, "world", None)
-    if world is None:  # goal-conditioned toys have no tactile world
+    from tactile_braille.envs.braille_env import BrailleEnv
+
+    if not isinstance(env.unwrapped, BrailleEnv):  # goal-conditioned toys have no tactile world
         return
-    world = json.loads(json.dumps(world))  # as stored: tuples become lists
+    world = json.loads(json.dumps(env.unwrapped.world))  # as stored: tuples become lists
     path = run_dir / WORLD_FILE
     if path.exists():
         stored = json.loads(path.read_text())
-        differ = sorted(
-            key for key in set(stored) | set(world) if key != "dataset" and stored.get(key) != world.get(key)
-        )
+        stored.pop("dataset", None)  # where the dataset lies may change; what it holds may not
+        differ = _differences(stored, {k: v for k, v in world.items() if k != "dataset"})
         if differ:
+            shown = "; ".join(differ[:3]) + (f"; and {len(differ) - 3} more" if len(differ) > 3 else "")
             raise ValueError(
-                f"{run_dir} was trained in another world than this one (they differ in {', '.join(differ)}: "
-                f"stored generator {stored.get('generator_version')}, now {world.get('generator_version')}); "
+                f"{run_dir} was trained in another world than this one ({shown}); "
                 "start a new run instead of resuming it"
             )
         return
@@ -338,6 +338,17 @@ def _record_world(run_dir: Path, env: gym.Env, resume: bool) -> None:
         return
     with atomic_path(path) as temporary:
         temporary.write_text(json.dumps(world, indent=2, sort_keys=True))
+
+
+def _differences(stored, now, path: str = "") -> list[str]:
+    """``path: stored -> now`` for each leaf in which two JSON values differ."""
+    if isinstance(stored, dict) and isinstance(now, dict):
+        return [
+            line
+            for key in sorted(set(stored) | set(now))
+            for line in _differences(stored.get(key), now.get(key), f"{path}.{key}" if path else key)
+        ]
+    return [] if stored == now else [f"{path or 'world'}: {json.dumps(stored)} -> {json.dumps(now)}"]
 
 
 def run_world(run_dir: str | Path) -> dict | None:

@@ -57,7 +57,8 @@ class PerturbedTaps:
         split: ``"train"`` or ``"validation"``; the splits draw different perturbations.
         depth_mm: nominal tap depth below the work-frame origin (5 mm: 1.5 mm
             into the key tops, short of actuation but for the earliest
-            switches: Q and O register from 4.85 mm on the virtual rig).
+            switches: O, P, Q, S, V and X register from 4.85-4.95 mm at
+            their centres on the virtual rig).
         include_none: add a NONE class of taps in the air (depth 0, touching nothing).
         position_range_mm, depth_range_mm, yaw_range_deg: perturbation bounds.
         seed: seeds the perturbations.

@@ -69,11 +69,13 @@ class DatasetBackend:
             self._index_keys(dataset)
 
     def describe(self) -> dict:
-        """The world the images come from: the dataset, its generator and its rig's parameters."""
+        """The world the images come from: the dataset (procedure, seed, generator), its rig's parameters."""
         metadata = self.dataset.metadata
         return {
             "backend": self.name,
             "dataset": str(self.dataset.path),
+            "procedure": metadata.procedure,
+            "seed": metadata.seed,
             "generator_version": metadata.generator_version,
             "rig": metadata.rig,
             "keyboard": metadata.keyboard,

@@ -21,8 +21,9 @@ DISCRETE_ACTIONS: tuple[str, ...] = ("UP", "DOWN", "LEFT", "RIGHT", "PRESS")
 MOVE_TAP_DEPTH_MM = 5.0
 """Depth of the tap that reads the key after a discrete move (1.5 mm into the
 key top; the rig backends perturb it to 4-5 mm). Short of actuation but for
-the earliest switches (Q and O register from 4.85 mm on the virtual rig); a
-press during a reading tap does not count as the agent's press."""
+the earliest switches (O, P, Q, S, V and X register at or above 4.85-4.95 mm
+at their centres on the virtual rig); a press during a reading tap does not
+count as the agent's press."""
 PRESS_DEPTH_MM = 8.0
 """Depth of a discrete PRESS (the paper's 8 mm)."""
 RESET_TAP_DEPTH_MM = 4.0

@@ -16,6 +16,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import re
 import textwrap
 from dataclasses import dataclass, field
 from importlib import resources
@@ -135,7 +136,8 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
         records.append(RunRecord(
             path=run_dir, task=config.task.split("/")[-1], algo=config.algo, seed=config.seed,
             returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
-            world=None if world is None else world.get("generator_version", world.get("rig")),
+            world=(GENERATOR_VERSION if not config.task.startswith("tactile_braille/") else None)
+            if world is None else world.get("generator_version", world.get("rig")),
         ))  # fmt: skip
     return records
 
@@ -335,8 +337,8 @@ def write_report(
         run_dirs: the runs' folders.
         output: a folder (``output/results.md`` and the figures in it) or a
             Markdown file (``docs/results.md``: the figures go in ``docs/results/``).
-            Figures of groups no longer reported (``confusion_*.png``,
-            ``trajectories_*.png``) are removed from there.
+            Figures that the previous report there linked and this one does
+            not (groups no longer reported) are removed.
         title: the report's title.
         notes: Markdown placed after the table (a reading of the results).
         command: the command that made the report, quoted in it.
@@ -351,6 +353,9 @@ def write_report(
     groups = group(load_records(run_dirs))
     if not groups:
         raise ValueError("no runs to report")
+    previous: set[str] = set()  # the figures the previous report here linked
+    if report.exists():
+        previous = set(re.findall(r"\]\(" + re.escape(link) + r"([^)/]+\.png)\)", report.read_text()))
     figures.mkdir(parents=True, exist_ok=True)
     written = {plot_curves(groups, figures / "curves.png").name}
     lines = [
@@ -389,7 +394,6 @@ def write_report(
         lines.append("")
     with atomic_path(report) as temporary:
         temporary.write_text("\n".join(lines))
-    for stale in [*figures.glob("confusion_*.png"), *figures.glob("trajectories_*.png")]:
-        if stale.name not in written:
-            stale.unlink()
+    for stale in previous - written:
+        (figures / stale).unlink(missing_ok=True)
     return report

@@ -196,10 +196,11 @@ def fit_travel_offsets(
     """Per-key travel offsets that best reproduce a map's outcomes.
 
     Coordinate search on exact agreement over ``taps`` (indices; all by
-    default): each heard key's offset in turn takes the value of the grid
-    ``-limit_mm .. limit_mm`` (``step_mm`` apart) that matches the most taps,
-    the smallest such value on ties, until a sweep changes nothing. The
-    switch's own offsets are replaced, not added to.
+    default): each heard key's offset in turn takes the value of the grid of
+    multiples of ``step_mm`` within ``+/- limit_mm`` that matches the most
+    taps (on ties the smallest in magnitude, the negative one first), until a
+    sweep changes nothing or ``sweeps`` sweeps are done. The switch's own
+    offsets are replaced, not added to.
 
     Returns:
         The offsets of the keys whose offset is not 0, ``{key name: mm}``.
@@ -214,8 +215,9 @@ def fit_travel_offsets(
     margin, names = _heard_margins(activation_map, switch, frame, KeyboardLayout())
     taps = np.arange(len(activation_map)) if taps is None else np.asarray(taps)
     margin, observed = margin[taps], activation_map.pressed[taps]
-    grid = np.round(np.arange(-limit_mm, limit_mm + step_mm / 2, step_mm), 6)
-    grid = grid[np.argsort(np.abs(grid), kind="stable")]
+    steps = int(np.floor(limit_mm / step_mm + 1e-9))
+    grid = np.round(step_mm * np.arange(-steps, steps + 1), 6)  # symmetric, 0 included
+    grid = grid[np.argsort(np.abs(grid), kind="stable")]  # tried from 0 outwards, negative first
     offsets = np.zeros(len(names))
     for _ in range(sweeps):
         changed = False

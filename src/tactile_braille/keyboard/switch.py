@@ -92,10 +92,11 @@ class SwitchModel:
             over which its stabiliser keeps it level (no rocking).
         clearance_mm: height of the work frame origin above the key tops
             (3.5 mm on the paper's rig).
-        travel_offsets_mm: ``(key name, offset)`` pairs: each named key
-            registers ``offset`` mm earlier than ``actuation_travel_mm`` says
-            (later where negative), its switch's own pre-travel tolerance.
-            Keys not named have offset 0. At most ``SWITCH_TOLERANCE_MM`` each.
+        travel_offsets_mm: ``(key name, offset)`` pairs (or a mapping): each
+            named key registers ``offset`` mm earlier than
+            ``actuation_travel_mm`` says (later where negative), its switch's
+            own pre-travel tolerance. Keys not named have offset 0. At most
+            ``SWITCH_TOLERANCE_MM`` each. Stored sorted by key, without zeros.
     """
 
     dome_radius_mm: float = 14.45
@@ -130,18 +131,19 @@ class SwitchModel:
         ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be non-negative, got {getattr(self, name)!r}")
-        pairs = self.travel_offsets_mm
-        if isinstance(pairs, Mapping):
-            pairs = tuple(pairs.items())
+        given = self.travel_offsets_mm
         try:
-            offsets = {str(name): float(offset) for name, offset in pairs}
+            pairs = [(str(name), float(offset)) for name, offset in (
+                given.items() if isinstance(given, Mapping) else given
+            )]  # fmt: skip
         except (TypeError, ValueError):
             raise ValueError(
-                "travel_offsets_mm must be a mapping or (key name, offset in mm) pairs, "
-                f"got {self.travel_offsets_mm!r}"
+                f"travel_offsets_mm must be a mapping or (key name, offset in mm) pairs, got {given!r}"
             ) from None
+        offsets = dict(pairs)
         if len(offsets) != len(pairs):
-            raise ValueError("travel_offsets_mm names a key twice")
+            twice = sorted({name for name, _ in pairs if [n for n, _ in pairs].count(name) > 1})
+            raise ValueError(f"travel_offsets_mm names {', '.join(twice)} more than once")
         unknown = sorted(set(offsets) - {key.name for key in KeyboardLayout().keys})
         if unknown:
             raise ValueError(f"travel_offsets_mm names keys the keyboard does not have: {unknown}")
@@ -156,7 +158,8 @@ class SwitchModel:
                     f"travel offset of {name} ({offset} mm) must be less than actuation_travel_mm "
                     f"({self.actuation_travel_mm} mm): the key would register before it is touched"
                 )
-        object.__setattr__(self, "travel_offsets_mm", tuple(offsets.items()))
+        # One spelling per model: sorted by key, zeros dropped (equal switches compare equal).
+        object.__setattr__(self, "travel_offsets_mm", tuple(sorted((k, v) for k, v in offsets.items() if v)))
 
     def travel_offsets(self, layout: KeyboardLayout) -> np.ndarray:
         """(n_keys,) travel offset of each key of ``layout`` (0 for keys not named)."""
