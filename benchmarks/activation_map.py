@@ -87,6 +87,8 @@ def main() -> None:
     parser.add_argument("--offsets-output", default="outputs/travel_offsets.png")
     args = parser.parse_args()
     maps = {name: load_activation_map(name) for name in MAP_NAMES}
+    switch = SwitchModel()
+    offset_keys = {key for key, _ in switch.travel_offsets_mm}
     depth_counts = [len(np.unique(m.depth_mm)) for m in maps.values()]
     fig, axes = plt.subplots(4, max(depth_counts), figsize=(1.3 * max(depth_counts), 6.5), squeeze=False)
     for ax in axes.flat:
@@ -103,7 +105,6 @@ def main() -> None:
             f"{name:8s} actuated-tap agreement {result.actuated:6.1%} "
             f"(never-press {never.actuated:5.1%}, target 85%)  [{result.taps} taps]"
         )
-        offset_keys = {key for key, _ in SwitchModel().travel_offsets_mm}
         if offset_keys & set(key_set(name)):
             held_out = held_out_agreement(activation_map)
             print(
@@ -112,7 +113,7 @@ def main() -> None:
             )
             print(
                 f"{name:8s} travel offsets: a plane over the key centres explains "
-                f"R^2 = {offset_trend_r2(SwitchModel(), key_set(name)):.3f} of them"
+                f"R^2 = {offset_trend_r2(switch, key_set(name)):.3f} of them"
             )
         for row, (labels, what) in enumerate(((activation_map.pressed, "robot"), (predicted, "model"))):
             draw_activation_map(
@@ -130,7 +131,7 @@ def main() -> None:
     )
     fig.tight_layout()
     print(f"wrote {save_figure(fig, args.output)}")
-    plot_offsets(SwitchModel(), args.offsets_output)
+    plot_offsets(switch, args.offsets_output)
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ rows. The defaults are the joint fit to both of the original release's maps.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -162,13 +163,8 @@ class SwitchModel:
         object.__setattr__(self, "travel_offsets_mm", tuple(sorted((k, v) for k, v in offsets.items() if v)))
 
     def travel_offsets(self, layout: KeyboardLayout) -> np.ndarray:
-        """(n_keys,) travel offset of each key of ``layout`` (0 for keys not named)."""
-        offsets = np.zeros(len(layout))
-        for name, offset in self.travel_offsets_mm:
-            if name not in layout:
-                raise ValueError(f"travel_offsets_mm names {name!r}, which is not a key of the layout")
-            offsets[layout.key(name).index] = offset
-        return offsets
+        """(n_keys,) travel offset of each key of ``layout`` (0 for keys not named); read-only."""
+        return _offsets_by_index(self.travel_offsets_mm, layout)
 
     def keycap_top_half_size_mm(self, layout: KeyboardLayout) -> np.ndarray:
         """(n_keys, 2) half-sizes (x, y) of each key's flat top."""
@@ -242,3 +238,14 @@ class SwitchModel:
         best = np.argmax(margin, axis=-1)
         pressed = np.take_along_axis(margin, best[..., None], axis=-1)[..., 0] >= 0.0
         return np.where(pressed, best, -1)
+
+
+@functools.lru_cache(maxsize=16)
+def _offsets_by_index(offsets: tuple[tuple[str, float], ...], layout: KeyboardLayout) -> np.ndarray:
+    """The offsets as an array over ``layout``'s keys, built once per (offsets, layout): every tap
+    computes actuation margins."""
+    array = np.zeros(len(layout))
+    for name, offset in offsets:
+        array[layout.key(name).index] = offset
+    array.flags.writeable = False
+    return array
