@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import argparse
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import Normalize
+from matplotlib.patches import Rectangle
 
-from tactile_braille.gallery import draw_activation_map, save_figure
+from tactile_braille._figures import colormap, new_figure, save_figure
+from tactile_braille.gallery import draw_activation_map
 from tactile_braille.keyboard.calibration import (
     MAP_NAMES,
     RIG_TAP_OFFSET_MM,
@@ -42,14 +42,15 @@ def plot_offsets(switch: SwitchModel, path: str) -> None:
     """The alphabet keys on the keyboard, coloured by their travel offset."""
     layout = KeyboardLayout()
     offsets = dict(switch.travel_offsets_mm)
-    fig, ax = plt.subplots(figsize=(7.5, 2.9))
-    cmap = plt.get_cmap("coolwarm")
+    fig, axes = new_figure(figsize=(7.5, 2.9))
+    ax = axes[0, 0]
+    cmap = colormap("coolwarm")
     for name in key_set("alphabet"):
         key = layout.key(name)
         width = key.width_u * layout.pitch_mm
         value = offsets.get(name, 0.0)
         # The keyboard frame's y grows to the typist's left: draw -y to the right.
-        ax.add_patch(plt.Rectangle(
+        ax.add_patch(Rectangle(
             (-key.centre_y_mm - width / 2 + 0.5, -key.centre_x_mm - layout.pitch_mm / 2 + 0.5),
             width - 1, layout.pitch_mm - 1,
             color=cmap(0.5 + value / (2 * SWITCH_TOLERANCE_MM)), ec="black",
@@ -60,7 +61,7 @@ def plot_offsets(switch: SwitchModel, path: str) -> None:
     ax.set_ylim(-70, 12)
     ax.set_aspect("equal")
     ax.axis("off")
-    mappable = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(-SWITCH_TOLERANCE_MM, SWITCH_TOLERANCE_MM))
+    mappable = ScalarMappable(cmap=cmap, norm=Normalize(-SWITCH_TOLERANCE_MM, SWITCH_TOLERANCE_MM))
     fig.colorbar(mappable, ax=ax, fraction=0.03, label="mm earlier")
     ax.set_title(
         "Fitted switch travel offsets (mm; + registers earlier). Tolerance of an MX switch: +/- 0.6 mm",
@@ -90,7 +91,7 @@ def main() -> None:
     switch = SwitchModel()
     offset_keys = {key for key, _ in switch.travel_offsets_mm}
     depth_counts = [len(np.unique(m.depth_mm)) for m in maps.values()]
-    fig, axes = plt.subplots(4, max(depth_counts), figsize=(1.3 * max(depth_counts), 6.5), squeeze=False)
+    fig, axes = new_figure(4, max(depth_counts), figsize=(1.3 * max(depth_counts), 6.5))
     for ax in axes.flat:
         ax.axis("off")
     for index, (name, activation_map) in enumerate(maps.items()):

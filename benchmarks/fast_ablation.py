@@ -23,26 +23,27 @@ import numpy as np
 
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.report import convergence_epoch
-from tactile_braille.agents.train import read_progress, setting_differences, train
+from tactile_braille.agents.run import read_progress, setting_differences
+from tactile_braille.agents.training import train
 
 VARIANTS = {
     "fast": ("fast", {}),
-    "no-refits": ("fast", {"touch_refits": 0}),
-    "refit-500": ("fast", {"touch_refit_every": 500, "touch_refits": 8}),
-    "paper-relabel": ("fast", {"relabel": "paper"}),
-    "paper+all": ("paper", {"relabel": "all"}),
+    "no-refits": ("fast", {"touch": {"refits": 0}}),
+    "refit-500": ("fast", {"touch": {"refit_every": 500, "refits": 8}}),
+    "paper-relabel": ("fast", {"replay": {"relabel": "paper"}}),
+    "paper+all": ("paper", {"replay": {"relabel": "all"}}),
     # The continuous alphabet's additions, taken away one after another: the readout, the placed
     # goals, the asymmetric critics (what is left is the fast preset of session 3).
-    "latent": ("fast", {"touch_inputs": "features"}),
-    "latent-no-goal-positions": ("fast", {"touch_inputs": "features", "goal_positions": False}),
+    "latent": ("fast", {"touch": {"inputs": "features"}}),
+    "latent-no-goal-positions": ("fast", {"touch": {"inputs": "features", "goal_positions": False}}),
     "session-3-fast": (
         "fast",
-        {"touch_inputs": "features", "goal_positions": False, "agent": {"critic_pose": False}},
+        {"agent": {"critic_pose": False}, "touch": {"inputs": "features", "goal_positions": False}},
     ),
     # The same additions on the continuous arrows, which the preset leaves without them.
     "alphabet-additions": (
         "fast",
-        {"touch_inputs": "readout", "goal_positions": True, "agent": {"critic_pose": True}},
+        {"agent": {"critic_pose": True}, "touch": {"inputs": "readout", "goal_positions": True}},
     ),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in

@@ -17,12 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_braille.agents.train import TrainConfig, read_progress, touch_fit_steps
+from tactile_braille.agents.config import TrainConfig
+from tactile_braille.agents.extensions import touch_fit_steps
+from tactile_braille.agents.run import read_progress
 
 
 def refit_changes(run: Path, config: TrainConfig) -> tuple[list[float], list[float]] | None:
     """Test-return changes over the refit epochs and over the other epochs, or None without refits."""
-    if not config.touch_encoder:
+    if not config.touch.enabled:
         return None
     returns = [row["test/episodic_return"] for row in read_progress(run)]
     # The test after epoch i (0-based) follows step (i + 1) * steps_per_epoch; a fit after step s
@@ -49,7 +51,7 @@ def main() -> None:
             continue
         at_refits, others = changes
         print(
-            f"| {run.name} | {config.touch_inputs} | {len(at_refits)} | {np.mean(at_refits):+.3f} | "
+            f"| {run.name} | {config.touch.inputs} | {len(at_refits)} | {np.mean(at_refits):+.3f} | "
             f"{sum(change < 0 for change in at_refits)} | {np.mean(others):+.3f} |"
         )
 

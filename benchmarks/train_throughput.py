@@ -26,9 +26,9 @@ import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
 from tactile_braille.agents import preset_config, read_progress, train
-from tactile_braille.agents.networks import Encoder
 from tactile_braille.agents.replay import EpisodeReplayBuffer
-from tactile_braille.agents.train import make_agent, make_env
+from tactile_braille.agents.training import make_agent, make_env
+from tactile_braille.supervised.networks import Encoder
 
 TASKS = {
     "dqn": "tactile_braille/DiscreteArrows-v0",
@@ -73,9 +73,15 @@ def config_previous(env: gym.Env) -> int:
 
 def ours_steps_per_second(algo: str, precision: str, start: int, steps: int) -> float:
     config = preset_config(
-        "paper", TASKS[algo], algo, precision=precision, epochs=1, steps_per_epoch=start + steps,
-        start_steps=start, test_episodes=1,
-    )  # fmt: skip
+        "paper",
+        TASKS[algo],
+        algo,
+        precision=precision,
+        epochs=1,
+        steps_per_epoch=start + steps,
+        start_steps=start,
+        evaluation={"test_episodes": 1},
+    )
     with tempfile.TemporaryDirectory() as folder:
         run = train(config, run_dir=folder, progress=False)
         return read_progress(run)[0]["charts/SPS"]

@@ -132,9 +132,14 @@ def read_progress(run_dir) -> list[dict]:
 def test_dqn_with_her_solves_discrete_arrows(env_datasets, tmp_path):
     """A real learning run (about a minute): the paper's DQN + HER, one update per step."""
     config = TrainConfig(
-        task="tactile_braille/DiscreteArrows-v0", epochs=6, updates_per_step=1, test_episodes=10,
-        replay_capacity=10_000, dataset=str(env_datasets["tactile_braille/DiscreteArrows-v0"]), threads=1,
-    )  # fmt: skip
+        task="tactile_braille/DiscreteArrows-v0",
+        epochs=6,
+        updates_per_step=1,
+        dataset=str(env_datasets["tactile_braille/DiscreteArrows-v0"]),
+        threads=1,
+        evaluation={"test_episodes": 10},
+        replay={"capacity": 10000},
+    )
     run = train(config, run_dir=tmp_path / "run", progress=False)
     rows = read_progress(run)
     assert [int(r["epoch"]) for r in rows] == list(range(6))
@@ -150,7 +155,7 @@ def test_resume_after_kill_completes_every_epoch_once(env_datasets, tmp_path):
     script = (
         "from tactile_braille.agents import TrainConfig, train\n"
         f"config = TrainConfig(epochs=4, steps_per_epoch=60, start_steps=30, updates_per_step=1, "
-        f"test_episodes=2, replay_capacity=2000, dataset={dataset!r}, threads=1)\n"
+        f"evaluation={{'test_episodes': 2}}, replay={{'capacity': 2000}}, dataset={dataset!r}, threads=1)\n"
         f"train(config, run_dir={str(run_dir)!r}, progress=False)\n"
     )
     child = subprocess.Popen(
@@ -184,9 +189,16 @@ def test_discrete_sac_trains_checkpoints_and_resumes(env_datasets, tmp_path):
     """A short discrete-SAC run: finite losses logged, a checkpoint that resumes to more epochs."""
     dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
     config = TrainConfig(
-        algo="sac_discrete", epochs=1, steps_per_epoch=60, start_steps=20, updates_per_step=1,
-        test_episodes=2, replay_capacity=2000, dataset=dataset, threads=1,
-    )  # fmt: skip
+        algo="sac_discrete",
+        epochs=1,
+        steps_per_epoch=60,
+        start_steps=20,
+        updates_per_step=1,
+        dataset=dataset,
+        threads=1,
+        evaluation={"test_episodes": 2},
+        replay={"capacity": 2000},
+    )
     run = train(config, run_dir=tmp_path / "run", progress=False)
     (row,) = read_progress(run)
     for name in ("losses/qf_loss", "losses/actor_loss", "losses/alpha", "losses/entropy"):
@@ -208,9 +220,15 @@ def test_a_run_records_its_world_and_resumes_only_in_it(env_datasets, tmp_path):
 
     dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
     config = TrainConfig(
-        epochs=1, steps_per_epoch=40, start_steps=20, updates_per_step=1, test_episodes=2,
-        replay_capacity=500, dataset=dataset, threads=1,
-    )  # fmt: skip
+        epochs=1,
+        steps_per_epoch=40,
+        start_steps=20,
+        updates_per_step=1,
+        dataset=dataset,
+        threads=1,
+        evaluation={"test_episodes": 2},
+        replay={"capacity": 500},
+    )
     run = train(config, run_dir=tmp_path / "run", progress=False)
     world = json.loads((run / "world.json").read_text())
     assert world["backend"] == "dataset" and world["dataset"] == dataset
@@ -278,9 +296,15 @@ def test_report_evaluates_the_checkpoint_and_draws_the_curve(env_datasets, tmp_p
     from tactile_braille.cli import main
 
     config = TrainConfig(
-        epochs=2, steps_per_epoch=40, start_steps=20, updates_per_step=1, test_episodes=2,
-        replay_capacity=500, dataset=str(env_datasets["tactile_braille/DiscreteArrows-v0"]), threads=1,
-    )  # fmt: skip
+        epochs=2,
+        steps_per_epoch=40,
+        start_steps=20,
+        updates_per_step=1,
+        dataset=str(env_datasets["tactile_braille/DiscreteArrows-v0"]),
+        threads=1,
+        evaluation={"test_episodes": 2},
+        replay={"capacity": 500},
+    )
     run = train(config, run_dir=tmp_path / "run", progress=False)
     assert main(["report", str(run), "--episodes", "3"]) == 0
     report = (run / "report.md").read_text()

@@ -30,9 +30,14 @@ toys.register()
 
 def run(tmp_path, name: str, **settings) -> list[float]:
     config = TrainConfig(
-        start_steps=100, updates_per_step=1, test_episodes=20, replay_capacity=20_000, precision="bf16",
-        threads=2, **settings,
-    )  # fmt: skip
+        start_steps=100,
+        updates_per_step=1,
+        precision="bf16",
+        threads=2,
+        evaluation={"test_episodes": 20},
+        replay={"capacity": 20000, **settings.pop("replay", {})},
+        **settings,
+    )
     folder = train(config, run_dir=tmp_path / name, progress=False)
     return [row["test/episodic_return"] for row in read_progress(folder)]
 
@@ -40,8 +45,8 @@ def run(tmp_path, name: str, **settings) -> list[float]:
 def test_her_solves_bit_flipping_that_fails_without_it(tmp_path):
     """Six bits: random pressing succeeds once in 64 episodes; the paper's HER rule makes it learnable."""
     common = {"task": "toys/BitFlipPress-v0", "algo": "dqn", "steps_per_epoch": 200}
-    with_her = run(tmp_path, "her", epochs=12, her=True, **common)
-    without_her = run(tmp_path, "no_her", epochs=6, her=False, **common)
+    with_her = run(tmp_path, "her", epochs=12, **common, replay={"her": True})
+    without_her = run(tmp_path, "no_her", epochs=6, **common, replay={"her": False})
     assert max(with_her[-3:]) >= 0.9, with_her
     assert max(without_her) <= 0.2, without_her
 

@@ -23,9 +23,11 @@ from tactile_braille.agents.common import POSE_SIZE
 from tactile_braille.agents.networks import ContinuousQNetwork
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.report import load_run
-from tactile_braille.agents.touch import TouchAgent, TouchEncoder, feature_space
+from tactile_braille.agents.run import read_progress, setting_differences
+from tactile_braille.agents.touch import TouchAgent, feature_space
+from tactile_braille.supervised.touch import TouchEncoder
 
-train_module = importlib.import_module("tactile_braille.agents.train")
+train_module = importlib.import_module("tactile_braille.agents.training")
 toys.register()
 
 TASK = "tactile_braille/ContinuousArrows-v0"
@@ -207,7 +209,7 @@ def test_the_touch_wrapper_standardises_poses_as_the_encoders_targets():
 
 # ---------------------------------------------------------------- training runs and the preset
 def test_critic_pose_needs_the_touch_encoders_labelled_frames(env_datasets):
-    with pytest.raises(ValueError, match="set touch_encoder too"):
+    with pytest.raises(ValueError, match="critic_pose learns from a touch encoder.*set touch.enabled too"):
         TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), agent=SACConfig(critic_pose=True))
 
 
@@ -220,15 +222,22 @@ def test_a_touch_run_trains_asymmetric_critics_on_the_labelled_poses(env_dataset
         return original(self, data)
 
     config = TrainConfig(
-        task=TASK, algo="sac", epochs=1, steps_per_epoch=30, start_steps=12, test_episodes=1,
-        replay_capacity=200, threads=1, dataset=str(env_datasets[TASK]), touch_encoder=True,
-        touch_epochs=2, snapshots=1,
+        task=TASK,
+        algo="sac",
+        epochs=1,
+        steps_per_epoch=30,
+        start_steps=12,
+        threads=1,
+        dataset=str(env_datasets[TASK]),
         agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
-    )  # fmt: skip
+        evaluation={"test_episodes": 1, "snapshots": 1},
+        replay={"capacity": 200},
+        touch={"enabled": True, "epochs": 2},
+    )
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(TouchAgent, "update", recording_update)
         run = train_module.train(config, run_dir=tmp_path / "run", progress=False)
-    (row,) = train_module.read_progress(run)
+    (row,) = read_progress(run)
     assert len(seen) == row["updates"] > 0
     for data in seen:
         assert data["poses"].shape == data["next_poses"].shape == (8, POSE_SIZE)
@@ -244,11 +253,11 @@ def test_a_touch_run_trains_asymmetric_critics_on_the_labelled_poses(env_dataset
 def test_the_fast_preset_gives_its_continuous_alphabet_additions_to_that_task_only():
     for algo in ("sac", "td3"):
         config = preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", algo)
-        assert config.agent.critic_pose and config.goal_positions and config.touch_inputs == "readout"
+        assert config.agent.critic_pose and config.touch.goal_positions and config.touch.inputs == "readout"
     for preset, task in (("fast", TASK), ("paper", "tactile_braille/ContinuousAlphabet-v0")):
         config = preset_config(preset, task, "sac")
-        assert not config.agent.critic_pose and not config.goal_positions
-        assert config.touch_inputs == "features"
+        assert not config.agent.critic_pose and not config.touch.goal_positions
+        assert config.touch.inputs == "features"
 
 
 # ---------------------------------------------------------------- goals placed on the layout
@@ -280,21 +289,30 @@ def test_a_placed_goal_is_the_one_hot_followed_by_the_keys_standardised_position
 
 
 def test_goal_positions_need_a_touch_encoder_and_a_keyboard(env_datasets):
-    with pytest.raises(ValueError, match=r"goal_positions places the goal keys .* set touch_encoder too"):
-        TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), goal_positions=True)
-    with pytest.raises(ValueError, match="touch_inputs='readout' reads a touch encoder"):
-        TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch_inputs="readout")
+    with pytest.raises(
+        ValueError, match=r"touch.goal_positions learns from a touch encoder.* set touch.enabled too"
+    ):
+        TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch={"goal_positions": True})
+    with pytest.raises(ValueError, match="touch.inputs='readout' learns from a touch encoder"):
+        TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch={"inputs": "readout"})
     with pytest.raises(ValueError, match="a keyboard layout"):
-        TrainConfig(task="toys/BitFlipPress-v0", algo="dqn", touch_encoder=True, goal_positions=True)
+        TrainConfig(task="toys/BitFlipPress-v0", algo="dqn", touch={"enabled": True, "goal_positions": True})
 
 
 def test_a_run_with_placed_goals_acts_on_env_observations_and_learns_on_placed_goals(env_datasets, tmp_path):
     config = TrainConfig(
-        task=TASK, algo="sac", epochs=1, steps_per_epoch=30, start_steps=12, test_episodes=2,
-        replay_capacity=200, threads=1, dataset=str(env_datasets[TASK]), touch_encoder=True,
-        touch_epochs=2, snapshots=1,
-        goal_positions=True, agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
-    )  # fmt: skip
+        task=TASK,
+        algo="sac",
+        epochs=1,
+        steps_per_epoch=30,
+        start_steps=12,
+        threads=1,
+        dataset=str(env_datasets[TASK]),
+        agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
+        evaluation={"test_episodes": 2, "snapshots": 1},
+        replay={"capacity": 200},
+        touch={"enabled": True, "epochs": 2, "goal_positions": True},
+    )
     run = train_module.train(config, run_dir=tmp_path / "run", progress=False)
     _, env, agent = load_run(run)
     layout = env.unwrapped.layout
@@ -341,10 +359,18 @@ def test_a_touch_agent_on_the_readout_encodes_with_the_heads():
 
 def test_a_run_on_the_readout_learns_and_acts_on_it(env_datasets, tmp_path):
     config = TrainConfig(
-        task=TASK, algo="sac", epochs=1, steps_per_epoch=30, start_steps=12, test_episodes=2,
-        replay_capacity=200, threads=1, dataset=str(env_datasets[TASK]), touch_encoder=True,
-        touch_epochs=2, snapshots=1, touch_inputs="readout", agent=SACConfig(hidden=(16,), batch_size=8),
-    )  # fmt: skip
+        task=TASK,
+        algo="sac",
+        epochs=1,
+        steps_per_epoch=30,
+        start_steps=12,
+        threads=1,
+        dataset=str(env_datasets[TASK]),
+        agent=SACConfig(hidden=(16,), batch_size=8),
+        evaluation={"test_episodes": 2, "snapshots": 1},
+        replay={"capacity": 200},
+        touch={"enabled": True, "epochs": 2, "inputs": "readout"},
+    )
     run = train_module.train(config, run_dir=tmp_path / "run", progress=False)
     _, env, agent = load_run(run)
     assert agent.inputs == "readout" and agent.agent.actor.trunk.dense[0].in_features == (
@@ -357,8 +383,8 @@ def test_a_run_on_the_readout_learns_and_acts_on_it(env_datasets, tmp_path):
     assert agent.policy_action(observation, 0, explore=False, rng=np.random.default_rng(0)).shape == (
         ACTIONS,
     )
-    with pytest.raises(ValueError, match="touch_inputs must be one of"):
-        config.with_changes(touch_inputs="pixels")
+    with pytest.raises(ValueError, match="TouchConfig.inputs must be one of"):
+        config.with_changes(touch={"inputs": "pixels"})
 
 
 @pytest.mark.parametrize("algo", ["sac", "td3"])
@@ -392,11 +418,25 @@ def test_a_run_with_every_addition_resumes_on_its_readout(env_datasets, tmp_path
         return original(self, encode, size, *args, **kwargs)
 
     config = TrainConfig(
-        task=TASK, algo="sac", epochs=2, steps_per_epoch=20, start_steps=12, test_episodes=1,
-        replay_capacity=200, threads=1, dataset=str(env_datasets[TASK]), touch_encoder=True,
-        touch_epochs=2, touch_refits=1, touch_refit_every=20, snapshots=1, goal_positions=True,
-        touch_inputs="readout", agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
-    )  # fmt: skip
+        task=TASK,
+        algo="sac",
+        epochs=2,
+        steps_per_epoch=20,
+        start_steps=12,
+        threads=1,
+        dataset=str(env_datasets[TASK]),
+        agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
+        evaluation={"test_episodes": 1, "snapshots": 1},
+        replay={"capacity": 200},
+        touch={
+            "enabled": True,
+            "epochs": 2,
+            "refits": 1,
+            "refit_every": 20,
+            "goal_positions": True,
+            "inputs": "readout",
+        },
+    )
     run = tmp_path / "run"
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(EpisodeReplayBuffer, "set_encoder", recording_set_encoder)
@@ -408,8 +448,8 @@ def test_a_run_with_every_addition_resumes_on_its_readout(env_datasets, tmp_path
         train_module.train(run_dir=run, resume=True, progress=False)
     readout = TouchEncoder(GOALS).readout_size
     assert sizes == [readout] * len(sizes) and len(sizes) == 3  # the first fit, the refit, the resume
-    assert [row["epoch"] for row in train_module.read_progress(run)] == [0, 1, 2]
-    assert train_module.setting_differences(run, config) == []
+    assert [row["epoch"] for row in read_progress(run)] == [0, 1, 2]
+    assert setting_differences(run, config) == []
     _, _, agent = load_run(run)
     after = agent.state_dict()
     assert not torch.equal(before["critics"]["0.q.weight"], after["critics"]["0.q.weight"])  # it learnt on
@@ -417,12 +457,18 @@ def test_a_run_with_every_addition_resumes_on_its_readout(env_datasets, tmp_path
 
 
 def test_a_run_from_before_these_settings_compares_with_their_defaults(env_datasets, tmp_path):
-    config = TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch_encoder=True)
+    config = TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch={"enabled": True})
     old = json.loads(json.dumps(config.to_json()))
-    for key in ("goal_positions", "touch_inputs"):
-        del old[key]
+    for key in ("goal_positions", "inputs"):
+        del old["touch"][key]
     del old["agent"]["critic_pose"]
     (tmp_path / "config.json").write_text(json.dumps({**old, "epochs": 99}))
-    assert train_module.setting_differences(tmp_path, config) == []  # epochs may differ
-    changed = config.with_changes(goal_positions=True, touch_inputs="readout", agent={"critic_pose": True})
-    assert train_module.setting_differences(tmp_path, changed) == ["agent", "goal_positions", "touch_inputs"]
+    assert setting_differences(tmp_path, config) == []  # epochs may differ
+    changed = config.with_changes(
+        agent={"critic_pose": True}, touch={"goal_positions": True, "inputs": "readout"}
+    )
+    assert setting_differences(tmp_path, changed) == [
+        "agent.critic_pose: False -> True",
+        "touch.goal_positions: False -> True",
+        "touch.inputs: 'features' -> 'readout'",
+    ]

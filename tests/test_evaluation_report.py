@@ -88,9 +88,16 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     runs = []
     for seed in (0, 1):
         config = TrainConfig(
-            seed=seed, epochs=3, steps_per_epoch=30, start_steps=20, updates_per_step=1, test_episodes=2,
-            replay_capacity=500, dataset=dataset, threads=1,
-        )  # fmt: skip
+            seed=seed,
+            epochs=3,
+            steps_per_epoch=30,
+            start_steps=20,
+            updates_per_step=1,
+            dataset=dataset,
+            threads=1,
+            evaluation={"test_episodes": 2},
+            replay={"capacity": 500},
+        )
         runs.append(train(config, run_dir=tmp_path / f"run{seed}", progress=False))
     # Figures the previous report linked, of a group this one no longer holds, are removed;
     # files it did not link are left alone.

@@ -7,8 +7,15 @@ import pytest
 from tactile_braille.agents import read_progress
 from tactile_braille.sweep import Trial, plan, run_trial, sweep
 
-TINY = {"epochs": 1, "steps_per_epoch": 30, "start_steps": 20, "test_episodes": 1, "replay_capacity": 500,
-        "threads": 1, "updates_per_step": 1}  # fmt: skip
+TINY = {
+    "epochs": 1,
+    "steps_per_epoch": 30,
+    "start_steps": 20,
+    "threads": 1,
+    "updates_per_step": 1,
+    "evaluation": {"test_episodes": 1},
+    "replay": {"capacity": 500},
+}
 
 
 def test_plan_pairs_algorithms_with_matching_tasks():
@@ -35,7 +42,7 @@ def test_sequential_sweep_is_resumable_and_retries(env_datasets, tmp_path, monke
     sweep(trials, tmp_path, use_ray=False, progress=False)  # finished trials return at once
     assert (runs[0] / "progress.csv").read_text() == before
     other = plan(["DiscreteArrows-v0"], ["dqn"], [0], dataset=dataset, **{**TINY, "precision": "bf16"})
-    with pytest.raises(ValueError, match=r"other settings \(precision\)"):
+    with pytest.raises(ValueError, match=r"other settings \(precision: 'fp32' -> 'bf16'\)"):
         sweep(other, tmp_path, use_ray=False, progress=False)
     longer = plan(["DiscreteArrows-v0"], ["dqn"], [0], dataset=dataset, **{**TINY, "epochs": 2})
     sweep(longer, tmp_path, use_ray=False, progress=False)  # more epochs extend the run

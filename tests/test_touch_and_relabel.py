@@ -33,22 +33,23 @@ from tactile_braille.agents import (
     read_progress,
 )
 from tactile_braille.agents.common import observation_features
+from tactile_braille.agents.extensions import touch_fit_steps
 from tactile_braille.agents.replay import FRAME_LABELS, PACKED_BYTES
 from tactile_braille.agents.report import evaluate_run, load_run
-from tactile_braille.agents.touch import (
-    KeyLocator,
-    LabelledTaps,
-    TouchAgent,
-    TouchEncoder,
-    TouchEncoderConfig,
-    feature_space,
-    fit_touch_encoder,
-)
+from tactile_braille.agents.touch import TouchAgent, feature_space
 from tactile_braille.evaluation.protocol import evaluate_typing
 from tactile_braille.keyboard.layout import ALPHABET_KEYS, ARROW_KEYS, KeyboardLayout
+from tactile_braille.supervised.touch import (
+    KeyLocator,
+    LabelledTaps,
+    TouchEncoder,
+    TouchEncoderConfig,
+    fit_touch_encoder,
+)
 
-# ``tactile_braille.agents.train`` the function shadows the module of the same name: use the registry.
-train_module = importlib.import_module("tactile_braille.agents.train")
+# ``tactile_braille.agents.training`` the function shadows the module of the same name: use the registry.
+train_module = importlib.import_module("tactile_braille.agents.training")
+extensions_module = importlib.import_module("tactile_braille.agents.extensions")
 
 DISCRETE_TASK = "tactile_braille/DiscreteArrows-v0"
 CONTINUOUS_TASK = "tactile_braille/ContinuousArrows-v0"
@@ -876,11 +877,21 @@ class RecordingFit:
 def touch_config(env_datasets, algo: str = "dqn", **changes) -> TrainConfig:
     task = CONTINUOUS_TASK if AGENTS[algo].continuous else DISCRETE_TASK
     settings = {
-        "task": task, "algo": algo, "epochs": 1, "steps_per_epoch": 20, "start_steps": 12, "test_episodes": 1,
-        "replay_capacity": 200, "threads": 1, "dataset": str(env_datasets[task]), "touch_encoder": True,
-        "touch_epochs": 2, "snapshots": 1, "agent": AGENTS[algo].config(hidden=(16,), batch_size=8),
-    }  # fmt: skip
-    return TrainConfig(**{**settings, **changes})
+        "task": task,
+        "algo": algo,
+        "epochs": 1,
+        "steps_per_epoch": 20,
+        "start_steps": 12,
+        "threads": 1,
+        "dataset": str(env_datasets[task]),
+        "agent": AGENTS[algo].config(hidden=(16,), batch_size=8),
+        "evaluation": {"test_episodes": 1, "snapshots": 1},
+        "replay": {"capacity": 200},
+        "touch": {"enabled": True, "epochs": 2},
+    }
+    groups = {name: {**settings[name], **changes.pop(name)} for name in ("evaluation", "replay", "touch")
+              if isinstance(changes.get(name), dict)}  # fmt: skip
+    return TrainConfig(**{**settings, **groups, **changes})
 
 
 def recorded_train(config, run_dir, resume: bool = False):
@@ -889,7 +900,7 @@ def recorded_train(config, run_dir, resume: bool = False):
     fit = RecordingFit()
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(train_module, "EpisodeReplayBuffer", FrameRecordingBuffer)
-        patch.setattr(train_module, "fit_touch_encoder", fit)
+        patch.setattr(extensions_module, "fit_touch_encoder", fit)
         train_module.train(config, run_dir=run_dir, resume=resume, progress=False)
     (buffer,) = FrameRecordingBuffer.made
     return buffer, fit
@@ -945,7 +956,7 @@ def touch_runs(env_datasets, tmp_path_factory) -> dict[str, tuple]:
     runs = {}
     for algo, relabel in (("dqn", "all"), ("sac", "paper")):
         run = tmp_path_factory.mktemp("touch") / algo
-        buffer, fit = recorded_train(touch_config(env_datasets, algo, relabel=relabel), run)
+        buffer, fit = recorded_train(touch_config(env_datasets, algo, replay={"relabel": relabel}), run)
         runs[algo] = (run, buffer, fit)
     return runs
 
@@ -955,7 +966,7 @@ def test_make_agent_builds_a_touch_agent_on_features(env_datasets, discrete_env)
     assert isinstance(agent, TouchAgent) and not agent.fitted
     assert agent.touch.features_size == TouchEncoderConfig().features and agent.touch.keys == GOALS
     assert agent.agent.q.trunk.encoder is None  # the learner has dense layers only
-    plain = train_module.make_agent(touch_config(env_datasets, touch_encoder=False), discrete_env)
+    plain = train_module.make_agent(touch_config(env_datasets, touch={"enabled": False}), discrete_env)
     assert isinstance(plain, DQNAgent) and plain.q.trunk.encoder is not None
 
 
@@ -1090,17 +1101,17 @@ def test_a_run_resumed_after_the_fit_reencodes_its_replay_with_the_loaded_encode
 
 
 def test_touch_fit_steps_follow_the_start_steps_at_the_refit_interval(env_datasets):
-    assert train_module.touch_fit_steps(touch_config(env_datasets)) == (12,)
-    assert train_module.touch_fit_steps(touch_config(env_datasets, touch_refits=3)) == (12, 24, 36, 48)
-    every = touch_config(env_datasets, touch_refits=2, touch_refit_every=5)
-    assert train_module.touch_fit_steps(every) == (12, 17, 22)
-    with pytest.raises(ValueError, match="touch_refit_every must be at least 1"):
-        touch_config(env_datasets, touch_refit_every=0)
+    assert touch_fit_steps(touch_config(env_datasets)) == (12,)
+    assert touch_fit_steps(touch_config(env_datasets, touch={"refits": 3})) == (12, 24, 36, 48)
+    every = touch_config(env_datasets, touch={"refits": 2, "refit_every": 5})
+    assert touch_fit_steps(every) == (12, 17, 22)
+    with pytest.raises(ValueError, match="TouchConfig.refit_every must be at least 1"):
+        touch_config(env_datasets, touch={"refit_every": 0})
 
 
 def test_a_refit_starts_from_the_current_encoder_on_every_labelled_frame_so_far(env_datasets, tmp_path):
     run = tmp_path / "refit"
-    config = touch_config(env_datasets, steps_per_epoch=26, touch_refits=1, touch_epochs=8)
+    config = touch_config(env_datasets, steps_per_epoch=26, touch={"refits": 1, "epochs": 8})
     buffer, fit = recorded_train(config, run)
     first, second = fit.calls
     assert first.init is None and first.epochs == 8
@@ -1125,7 +1136,7 @@ def test_a_refit_starts_from_the_current_encoder_on_every_labelled_frame_so_far(
 def test_report_and_typing_evaluate_a_touch_run_on_images(touch_runs, algo):
     run, _, _ = touch_runs[algo]
     config, env, agent = load_run(run)
-    assert config.touch_encoder and isinstance(agent, TouchAgent) and agent.fitted
+    assert config.touch.enabled and isinstance(agent, TouchAgent) and agent.fitted
     assert same_weights(agent.touch, saved_encoder(run))
     observation, _ = env.reset(seed=0)
     assert observation["observation"].shape == (100, 100, 1)
@@ -1147,10 +1158,10 @@ def test_report_and_typing_evaluate_a_touch_run_on_images(touch_runs, algo):
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        ({"relabel": "bogus"}, "relabel must be one of"),
+        ({"replay": {"relabel": "bogus"}}, "relabel must be one of"),
         ({"start_steps": 9}, "at least 10"),
-        ({"touch_epochs": 0}, "touch_epochs"),
-        ({"touch_refits": -1}, "touch_refits must not be negative"),
+        ({"touch": {"epochs": 0}}, "TouchConfig.epochs must be at least 1"),
+        ({"touch": {"refits": -1}}, "TouchConfig.refits must be at least 0"),
     ],
 )
 def test_train_config_rejects_bad_touch_and_relabel_settings(env_datasets, changes, message):
@@ -1159,4 +1170,4 @@ def test_train_config_rejects_bad_touch_and_relabel_settings(env_datasets, chang
 
 
 def test_few_start_steps_are_fine_without_a_touch_encoder(env_datasets):
-    assert touch_config(env_datasets, touch_encoder=False, start_steps=5).start_steps == 5
+    assert touch_config(env_datasets, start_steps=5, touch={"enabled": False}).start_steps == 5

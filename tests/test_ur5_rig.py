@@ -23,7 +23,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tactile_braille._registration import ENV_IDS
-from tactile_braille.agents.train import TrainConfig, read_progress, train
+from tactile_braille.agents.config import TrainConfig
+from tactile_braille.agents.run import read_progress
+from tactile_braille.agents.training import train
 from tactile_braille.datasets.collector import collect
 from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps
 from tactile_braille.datasets.store import load_dataset
@@ -520,9 +522,16 @@ def test_training_on_the_ur5_rig_checkpoints_survives_a_fault_and_resumes(tmp_pa
     """DQN + HER on DiscreteArrows with backend="rig": a fault mid-run, then a resume to the end."""
     world = SimulatedUR5(simulated_config(tap_log=str(tmp_path / "taps.csv")))
     config = TrainConfig(
-        task="tactile_braille/DiscreteArrows-v0", backend="rig", epochs=2, steps_per_epoch=60, start_steps=30,
-        updates_per_step=1, test_episodes=2, replay_capacity=1000, threads=1,
-    )  # fmt: skip
+        task="tactile_braille/DiscreteArrows-v0",
+        backend="rig",
+        epochs=2,
+        steps_per_epoch=60,
+        start_steps=30,
+        updates_per_step=1,
+        threads=1,
+        evaluation={"test_episodes": 2},
+        replay={"capacity": 1000},
+    )
     run_dir = tmp_path / "run"
     rig = open_rig(world)
     world.reconnect_allowed = True

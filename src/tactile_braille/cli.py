@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import matplotlib
-
-matplotlib.use("Agg")  # the command only writes files
-
 import argparse
 import shlex
 import sys
@@ -15,16 +11,16 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_braille.agents.config import ALGORITHMS, BACKENDS, PRECISIONS
+from tactile_braille.agents.presets import PRESETS as TRAINING_PRESETS
 from tactile_braille.gallery import GALLERY_DEPTH_MM
 from tactile_braille.rigs.base import RigError
-from tactile_braille.sensor.config import PRESETS
-
-PRESET_NAMES = ("paper", "released", "fast")
-"""Training presets (:data:`tactile_braille.agents.presets.PRESETS`, not imported here: it pulls in torch)."""
+from tactile_braille.sensor.config import PRESETS as SENSORS
 
 
 def _show(args: argparse.Namespace) -> int:
-    from tactile_braille.gallery import dataset_figure, live_gallery_tiles, save_figure, save_gallery
+    from tactile_braille._figures import save_figure
+    from tactile_braille.gallery import dataset_figure, live_gallery_tiles, save_gallery
 
     if args.dataset is not None:
         dataset = _load_named_dataset(args.dataset, args.sensor, args.seed)
@@ -53,11 +49,21 @@ def _make_rig(args: argparse.Namespace):
     return rig
 
 
-def _open_ur5(config_path: Path | None, simulated: bool, dry_run: bool = False):
-    """The UR5 rig of ``config_path`` (and ``None``), or a simulated one (and its world)."""
+def _ur5_hardware(
+    config_path: Path | None,
+    simulated: bool,
+    dry_run: bool = False,
+    command: str = "the rig",
+    option="--config",
+):
+    """The UR5 rig's settings, its drivers and, on simulated hardware, the simulated world.
+
+    Simulated hardware takes ``config_path``'s frames, or the simulated defaults without one; the real
+    robot needs its settings file. ``dry_run`` logs the arm's commands instead of sending them.
+    """
     import dataclasses
 
-    from tactile_braille.rigs.ur5 import UR5Config, UR5Rig
+    from tactile_braille.rigs.ur5 import UR5Config
 
     if simulated:
         from tactile_braille.rigs.fakes import SimulatedUR5, simulated_config
@@ -65,11 +71,21 @@ def _open_ur5(config_path: Path | None, simulated: bool, dry_run: bool = False):
         config = UR5Config.load(config_path) if config_path is not None else simulated_config()
         config = dataclasses.replace(config, dry_run=dry_run or config.dry_run)
         world = SimulatedUR5(config)
-        return UR5Rig(config, drivers=world.drivers()), world
+        return config, world.drivers(), world
     if config_path is None:
-        raise ValueError("the UR5 rig needs its settings: --rig-config rig.json (see docs/hardware.md)")
+        raise ValueError(f"{command} needs the rig's settings: {option} rig.json (see docs/hardware.md)")
+    from tactile_braille.rigs.hardware import real_drivers
+
     config = UR5Config.load(config_path)
-    return UR5Rig(dataclasses.replace(config, dry_run=dry_run or config.dry_run)), None
+    return dataclasses.replace(config, dry_run=dry_run or config.dry_run), real_drivers(), None
+
+
+def _open_ur5(config_path: Path | None, simulated: bool, dry_run: bool = False):
+    """The UR5 rig of ``config_path``, or a simulated one, and its simulated world (None on hardware)."""
+    from tactile_braille.rigs.ur5 import UR5Rig
+
+    config, drivers, world = _ur5_hardware(config_path, simulated, dry_run, "the UR5 rig", "--rig-config")
+    return UR5Rig(config, drivers=drivers), world
 
 
 def _print_commands(commands) -> None:
@@ -109,21 +125,12 @@ def _rig_calibrate(args: argparse.Namespace) -> int:
     import dataclasses
 
     from tactile_braille.rigs.calibration import ask_operator, fit_work_frame, record_reference_poses
-    from tactile_braille.rigs.hardware import URArm, real_drivers
+    from tactile_braille.rigs.hardware import URArm
     from tactile_braille.rigs.transforms import tcp_offset_to_ur
-    from tactile_braille.rigs.ur5 import UR5Config
 
     keys = [k.strip() for k in args.keys.split(",")]
-    if args.simulated:
-        from tactile_braille.rigs.fakes import SimulatedUR5, simulated_config
-
-        config = UR5Config.load(args.config) if args.config is not None else simulated_config()
-        world = SimulatedUR5(config)
-        drivers, wait = world.drivers(), world.jog_to_key_top  # a simulated operator
-    else:
-        if args.config is None:
-            raise ValueError("calibrate needs the rig's settings: --config rig.json")
-        config, drivers, wait = UR5Config.load(args.config), real_drivers(), ask_operator
+    config, drivers, world = _ur5_hardware(args.config, args.simulated, command="calibrate")
+    wait = world.jog_to_key_top if world is not None else ask_operator  # a simulated operator
     # Read only: no control script is started, the operator jogs from the pendant.
     arm = URArm(drivers, config.host, tcp_offset_to_ur(config.tcp_offset_mm_deg), dry_run=True)
     try:
@@ -147,19 +154,10 @@ def _rig_crop(args: argparse.Namespace) -> int:
     import dataclasses
 
     from tactile_braille.rigs.calibration import propose_crop_box, save_threshold_preview
-    from tactile_braille.rigs.hardware import TacTipCamera, real_drivers
-    from tactile_braille.rigs.ur5 import UR5Config
+    from tactile_braille.rigs.hardware import TacTipCamera
     from tactile_braille.sensor.config import sensor_preset
 
-    if args.simulated:
-        from tactile_braille.rigs.fakes import SimulatedUR5, simulated_config
-
-        config = UR5Config.load(args.config) if args.config is not None else simulated_config()
-        drivers = SimulatedUR5(config).drivers()
-    else:
-        if args.config is None:
-            raise ValueError("crop needs the rig's settings: --config rig.json")
-        config, drivers = UR5Config.load(args.config), real_drivers()
+    config, drivers, _ = _ur5_hardware(args.config, args.simulated, command="crop")
     camera = TacTipCamera(drivers, config.camera_index, config.camera_size_px, config.camera_exposure)
     try:
         frame = camera.read()
@@ -290,12 +288,15 @@ def _classify(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
+    from tactile_braille.agents.training import train
 
+    config = None if args.resume is not None else _train_config(args)
     rig = None
     if args.rig_config is not None or args.simulated_rig:
         rig, _ = _open_ur5(args.rig_config, simulated=args.simulated_rig)
     try:
-        run = _train_with(args, rig)
+        run = train(config, run_dir=args.resume or args.run_dir, resume=args.resume is not None,
+                    progress=not args.quiet, rig=rig)  # fmt: skip
     finally:
         if rig is not None:
             rig.close()
@@ -303,30 +304,21 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _train_with(args: argparse.Namespace, rig) -> Path:
+def _train_config(args: argparse.Namespace):
+    """The run's settings: the preset's, with every option given on top (checked before anything runs)."""
     from tactile_braille.agents.presets import preset_config
-    from tactile_braille.agents.train import train
+    from tactile_braille.cli_config import config_overrides
 
-    if args.resume is not None:
-        run = train(run_dir=args.resume, resume=True, progress=not args.quiet, rig=rig)
-    else:
-        if args.task is None:
-            raise ValueError("give a TASK (an environment id) or --resume RUN_DIR")
-        task = args.task if "/" in args.task else f"tactile_braille/{args.task}"
-        overrides = {
-            name: getattr(args, name)
-            for name in ("seed", "epochs", "backend", "device", "precision", "threads", "test_episodes",
-                         "updates_per_step", "checkpoint_every")
-            if getattr(args, name) is not None
-        }  # fmt: skip
-        if args.no_her:
-            overrides["her"] = False
-        agent = {"shared_encoder": True} if args.shared_encoder else {}
-        if args.shared_encoder and args.algo == "dqn":
-            raise ValueError("--shared-encoder is for actor-critic agents (sac_discrete, sac, td3)")
-        config = preset_config(args.preset, task, args.algo, agent=agent, **overrides)
-        run = train(config, run_dir=args.run_dir, progress=not args.quiet, rig=rig)
-    return run
+    if args.task is None:
+        raise ValueError("give a TASK (an environment id) or --resume RUN_DIR")
+    overrides = config_overrides(args, args.algo)
+    rig = args.rig_config is not None or args.simulated_rig
+    if rig and overrides.setdefault("backend", "rig") != "rig":
+        raise ValueError(
+            f"--rig-config and --simulated-rig train on the rig: drop --backend {overrides['backend']}"
+        )
+    task = args.task if "/" in args.task else f"tactile_braille/{args.task}"
+    return preset_config(args.preset, task, args.algo, **overrides)
 
 
 def _report(args: argparse.Namespace) -> int:
@@ -399,7 +391,7 @@ def _benchmark(args: argparse.Namespace) -> int:
 
 def _add_sweep_options(parser: argparse.ArgumentParser, root: str) -> None:
     parser.add_argument("--epochs", type=int, default=None, help="default: each preset's")
-    parser.add_argument("--precision", choices=("fp32", "bf16"), default=None)
+    parser.add_argument("--precision", choices=PRECISIONS, default=None)
     parser.add_argument("--threads", type=int, default=None, help="torch threads per trial")
     parser.add_argument("--root", type=Path, default=Path(root), help=f"run folders go here (default {root})")
     parser.add_argument("--ray", choices=("auto", "yes", "no"), default="auto",
@@ -410,19 +402,14 @@ def _add_sweep_options(parser: argparse.ArgumentParser, root: str) -> None:
     parser.add_argument("--title", default="Results", help="title of the report")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``tactile-braille``."""
-    parser = argparse.ArgumentParser(
-        prog="tactile-braille", description="Learning to type on a braille keyboard by touch."
-    )
-    commands = parser.add_subparsers(dest="command", required=True)
-
+def _add_show_command(commands) -> None:
+    """The ``show`` command."""
     show = commands.add_parser("show", help="write a gallery PNG of live renders or of a dataset")
     show.add_argument(
         "dataset", nargs="?", help="a dataset file or a default dataset's name (default: live renders)"
     )
     show.add_argument("--output", default="outputs/gallery.png", help="PNG to write")
-    show.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
+    show.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
     show.add_argument(
         "--depth",
         type=float,
@@ -432,6 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--seed", type=int, default=0, help="seed of the sensor nuisances")
     show.set_defaults(handler=_show)
 
+
+def _add_collect_command(commands) -> None:
+    """The ``collect`` command."""
     collect = commands.add_parser("collect", help="run a collection procedure on a rig into a dataset")
     collect.add_argument("--procedure", choices=("perturbed", "grid"), default="perturbed")
     collect.add_argument("--keys", choices=("arrows", "alphabet", "all"), default="all")
@@ -440,7 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="ur5: the real robot (--rig-config); simulated-ur5: the UR5 code path on simulated hardware",
     )  # fmt: skip
     collect.add_argument("--rig-config", type=Path, default=None, help="the UR5 rig's settings (JSON)")
-    collect.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
+    collect.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
     collect.add_argument("--output", type=Path, required=True, help="dataset file (.h5) to write")
     collect.add_argument("--seed", type=int, default=0)
     collect.add_argument("--resume", action="store_true", help="continue an interrupted collection")
@@ -450,6 +440,9 @@ def build_parser() -> argparse.ArgumentParser:
     collect.add_argument("--depth-step-mm", type=float, default=None, help="grid: depth step (paper's)")
     collect.set_defaults(handler=_collect)
 
+
+def _add_import_command(commands) -> None:
+    """The ``import`` command."""
     importer = commands.add_parser("import", help="import the original release's csv + mp4 recordings")
     importer.add_argument("csv", type=Path, help="targets_video.csv")
     importer.add_argument("--output", type=Path, required=True)
@@ -458,6 +451,9 @@ def build_parser() -> argparse.ArgumentParser:
     importer.add_argument("--resume", action="store_true")
     importer.set_defaults(handler=_import)
 
+
+def _add_classify_command(commands) -> None:
+    """The ``classify`` command."""
     classify = commands.add_parser("classify", help="train and evaluate the supervised key classifier")
     classify.add_argument("--train", default="keys-train", help="dataset file or default dataset name")
     classify.add_argument("--validation", default="keys-validation", help="dataset file or default name")
@@ -466,51 +462,37 @@ def build_parser() -> argparse.ArgumentParser:
     )
     classify.add_argument("--epochs", type=int, default=60, help="maximum epochs (early stopping)")
     classify.add_argument("--seed", type=int, default=0)
-    classify.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
+    classify.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
     classify.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     classify.set_defaults(handler=_classify)
 
+
+def _add_train_command(commands) -> None:
+    """The ``train`` command: a preset, every setting of the run as an option on top of it."""
+    from tactile_braille.cli_config import add_config_options
+
     trainer = commands.add_parser(
         "train", help="train an agent on a task (checkpointed, resumable)",
-        description="Settings come from --preset (the paper's Table II by default); options override them.",
+        usage="tactile-braille train [TASK [ALGO]] [--preset NAME] [--SETTING VALUE ...] [--resume RUN_DIR]",
+        description="Settings come from --preset (the paper's Table II by default); every option below "
+        "overrides the preset's value (docs/agents.md lists them).",
     )  # fmt: skip
     trainer.add_argument("task", nargs="?", help="environment id, e.g. DiscreteArrows-v0")
-    trainer.add_argument("algo", nargs="?", default="dqn", choices=("dqn", "sac_discrete", "sac", "td3"))
-    trainer.add_argument(
-        "--preset",
-        choices=PRESET_NAMES,
-        default="paper",
-        help="the paper's hyperparameters, the released code's, or ours (fast) (docs/agents.md)",
-    )
-    trainer.add_argument("--seed", type=int, default=None, help="default 0")
-    trainer.add_argument("--epochs", type=int, default=None, help="default: the preset's")
-    trainer.add_argument("--backend", choices=("dataset", "render", "rig"), default=None)
-    trainer.add_argument("--rig-config", type=Path, default=None, help="backend rig: the UR5 rig's settings")
-    trainer.add_argument(
-        "--simulated-rig", action="store_true", help="backend rig: the UR5 code path on simulated hardware"
-    )
-    trainer.add_argument("--device", default=None, help="cpu (default) or cuda")
-    trainer.add_argument(
-        "--precision",
-        choices=("fp32", "bf16"),
-        default=None,
-        help="bf16: bfloat16 autocast in the updates (default fp32)",
-    )
-    trainer.add_argument("--threads", type=int, default=None, help="torch CPU threads (default 2)")
-    trainer.add_argument("--test-episodes", type=int, default=None)
-    trainer.add_argument("--updates-per-step", type=int, default=None)
-    trainer.add_argument("--checkpoint-every", type=int, default=None, help="epochs (default 1)")
-    trainer.add_argument(
-        "--shared-encoder",
-        action="store_true",
-        help="actor reuses the critic's encoder, detached (not the paper's setting)",
-    )
-    trainer.add_argument("--no-her", action="store_true", help="turn hindsight relabelling off")
+    trainer.add_argument("algo", nargs="?", default="dqn", choices=ALGORITHMS)
+    trainer.add_argument("--preset", choices=TRAINING_PRESETS, default="paper",
+                         help="the paper's hyperparameters, the released code's, or ours (fast)")  # fmt: skip
     trainer.add_argument("--run-dir", type=Path, default=None, help="run folder (default: runs/...)")
     trainer.add_argument("--resume", type=Path, default=None, metavar="RUN_DIR", help="continue a run")
     trainer.add_argument("--quiet", action="store_true", help="no progress bar")
+    rig = trainer.add_argument_group("a robot (implies --backend rig)")
+    rig.add_argument("--rig-config", type=Path, default=None, help="the UR5 rig's settings (JSON)")
+    rig.add_argument("--simulated-rig", action="store_true", help="the UR5 code path on simulated hardware")
+    add_config_options(trainer)
     trainer.set_defaults(handler=_train)
 
+
+def _add_report_command(commands) -> None:
+    """The ``report`` command."""
     report = commands.add_parser("report", help="reports of training runs (and over runs and seeds)")
     report.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
     report.add_argument("--episodes", type=int, default=100, help="final test episodes (default 100)")
@@ -525,24 +507,33 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--notes", type=Path, default=None, help="Markdown file placed after the table")
     report.set_defaults(handler=_report)
 
+
+def _add_evaluate_command(commands) -> None:
+    """The ``evaluate`` command."""
     evaluate = commands.add_parser("evaluate", help="the paper's typing evaluation of a training run")
     evaluate.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
     evaluate.add_argument("--no-sentences", action="store_true", help="alphabet tasks: skip the sentences")
     evaluate.add_argument("--seed", type=int, default=0, help="seed of the start poses")
     evaluate.set_defaults(handler=_evaluate)
 
+
+def _add_sweep_command(commands) -> None:
+    """The ``sweep`` command."""
     sweeper = commands.add_parser("sweep", help="train tasks x algorithms x seeds (Ray Tune when installed)")
     sweeper.add_argument(
         "--tasks", nargs="+", required=True, help="e.g. DiscreteArrows-v0 DiscreteAlphabet-v0"
     )
-    sweeper.add_argument("--algos", nargs="+", required=True, choices=("dqn", "sac_discrete", "sac", "td3"))
+    sweeper.add_argument("--algos", nargs="+", required=True, choices=ALGORITHMS)
     sweeper.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    sweeper.add_argument("--preset", choices=PRESET_NAMES, default="paper")
-    sweeper.add_argument("--backend", choices=("dataset", "render"), default=None)
+    sweeper.add_argument("--preset", choices=TRAINING_PRESETS, default="paper")
+    sweeper.add_argument("--backend", choices=[b for b in BACKENDS if b != "rig"], default=None)
     sweeper.add_argument("--report", type=Path, default=None, help="write REPORT/results.md over the runs")
     _add_sweep_options(sweeper, "runs/sweep")
     sweeper.set_defaults(handler=_sweep)
 
+
+def _add_benchmark_command(commands) -> None:
+    """The ``benchmark`` command."""
     bench = commands.add_parser("benchmark", help="reproduce the simulated part of the paper's Table III")
     bench.add_argument("--paper", action="store_true", help="the paper's 8 simulated task x algorithm runs")
     bench.add_argument("--num-seeds", type=int, default=3)
@@ -550,11 +541,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_options(bench, "runs/paper-benchmark")
     bench.set_defaults(handler=_benchmark)
 
+
+def _add_data_command(commands) -> None:
+    """The ``data`` command."""
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
-    data.add_argument("--sensor", default="braille_331", choices=sorted(PRESETS))
+    data.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
     data.add_argument("--seed", type=int, default=0)
     data.set_defaults(handler=_data)
 
+
+def _add_keycaps_command(commands) -> None:
+    """The ``keycaps`` command."""
     keycaps = commands.add_parser(
         "keycaps", help="write 3D-printable braille keycaps (STL) and a preview PNG"
     )
@@ -565,6 +562,9 @@ def build_parser() -> argparse.ArgumentParser:
     keycaps.add_argument("--resolution-mm", type=float, default=0.25, help="grid step of the top surface")
     keycaps.set_defaults(handler=_keycaps)
 
+
+def _add_rig_command(commands) -> None:
+    """The ``rig`` command."""
     rig = commands.add_parser("rig", help="set up and check the UR5 rig (docs/hardware.md)")
     rig_commands = rig.add_subparsers(dest="rig_command", required=True)
     check = rig_commands.add_parser("check", help="a few taps; prints the arm's commands")
@@ -592,6 +592,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     crop.add_argument("--write", action="store_true", help="store the crop box in --config")
     crop.set_defaults(handler=_rig_crop)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``tactile-braille``."""
+    parser = argparse.ArgumentParser(
+        prog="tactile-braille", description="Learning to type on a braille keyboard by touch."
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    _add_show_command(commands)
+    _add_collect_command(commands)
+    _add_import_command(commands)
+    _add_classify_command(commands)
+    _add_train_command(commands)
+    _add_report_command(commands)
+    _add_evaluate_command(commands)
+    _add_sweep_command(commands)
+    _add_benchmark_command(commands)
+    _add_data_command(commands)
+    _add_keycaps_command(commands)
+    _add_rig_command(commands)
     return parser
 
 

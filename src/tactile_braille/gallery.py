@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_braille._io import atomic_path
+from tactile_braille._figures import colormap, new_figure, save_figure
 from tactile_braille.datasets.store import TactileDataset
 from tactile_braille.keyboard.layout import ALL_TASK_KEYS, NONE_KEY
 from tactile_braille.rigs.virtual import VirtualRig
@@ -67,11 +67,9 @@ def draw_activation_map(
         keys: the keys to colour, in colour order.
         row_title: label of the row.
     """
-    import matplotlib.pyplot as plt
-
     code = {key: i + 1 for i, key in enumerate(keys)}
     xs, ys = np.unique(x_mm), np.unique(y_mm)
-    cmap = plt.get_cmap("tab20", len(keys) + 1)
+    cmap = colormap("tab20", len(keys) + 1)
     for column, depth in enumerate(np.unique(depth_mm)):
         at_depth = depth_mm == depth
         grid = np.full((len(xs), len(ys)), np.nan)
@@ -89,22 +87,8 @@ def draw_activation_map(
             ax.set_ylabel(row_title, fontsize=7)
 
 
-def save_figure(fig, output: str | Path) -> Path:
-    """Save a matplotlib figure as PNG atomically (temporary file, then rename)."""
-    import matplotlib.pyplot as plt
-
-    try:
-        with atomic_path(output) as temporary:
-            fig.savefig(temporary, format="png", dpi=110)
-    finally:
-        plt.close(fig)
-    return Path(output)
-
-
 def dataset_figure(dataset: TactileDataset, max_tiles: int = 32):
     """A figure of a dataset: one image per label, and for grids the activation map at each depth."""
-    import matplotlib.pyplot as plt
-
     labels = dataset.label_names()
     shown = [name for name in dict.fromkeys(labels)][:max_tiles]
     is_grid = dataset.metadata.procedure.get("procedure") == "grid"
@@ -112,7 +96,7 @@ def dataset_figure(dataset: TactileDataset, max_tiles: int = 32):
     columns = max(8, len(depths))
     tile_rows = -(-len(shown) // columns)
     rows = tile_rows + (1 if is_grid else 0)
-    fig, axes = plt.subplots(rows, columns, figsize=(1.5 * columns, 1.7 * rows), squeeze=False)
+    fig, axes = new_figure(rows, columns, figsize=(1.5 * columns, 1.7 * rows))
     for ax in axes.flat:
         ax.axis("off")
     for ax, name in zip(axes[:tile_rows].flat, shown, strict=False):
@@ -138,12 +122,10 @@ def save_gallery(
     columns: int = 8,
 ) -> Path:
     """Write tiles as a PNG grid (the processed observation of each tile) atomically."""
-    import matplotlib.pyplot as plt
-
     if not tiles:
         raise ValueError("no tiles to draw")
     rows = -(-len(tiles) // columns)
-    fig, axes = plt.subplots(rows, columns, figsize=(1.6 * columns, 1.8 * rows), squeeze=False)
+    fig, axes = new_figure(rows, columns, figsize=(1.6 * columns, 1.8 * rows))
     for ax in axes.flat:
         ax.axis("off")
     for ax, (name, _frame, observation) in zip(axes.flat, tiles, strict=False):

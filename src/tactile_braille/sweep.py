@@ -23,8 +23,11 @@ from pathlib import Path
 from typing import Any
 
 from tactile_braille._io import atomic_path
+from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS
 from tactile_braille.agents.presets import preset_config
-from tactile_braille.agents.train import AGENTS, setting_differences, train
+from tactile_braille.agents.run import setting_differences
+from tactile_braille.agents.training import train
+from tactile_braille.envs.registry import task_of
 
 PAPER_SIM_RUNS = (
     ("DiscreteArrows-v0", "dqn"), ("DiscreteArrows-v0", "sac_discrete"),
@@ -49,9 +52,12 @@ class Trial:
     def name(self) -> str:
         return f"{self.task}__{self.algo}__{self.seed}"
 
+    @property
+    def env_id(self) -> str:
+        return self.task if "/" in self.task else f"tactile_braille/{self.task}"
+
     def config(self):
-        task = self.task if "/" in self.task else f"tactile_braille/{self.task}"
-        return preset_config(self.preset, task, self.algo, seed=self.seed, **dict(self.overrides))
+        return preset_config(self.preset, self.env_id, self.algo, seed=self.seed, **dict(self.overrides))
 
 
 def plan(
@@ -61,9 +67,10 @@ def plan(
     trials = []
     for task in tasks:
         for algo in algos:
-            if algo not in AGENTS:
-                raise ValueError(f"unknown algorithm {algo!r}; choose from {tuple(AGENTS)}")
-            if ("Continuous" in task) != AGENTS[algo].continuous:
+            if algo not in AGENT_CONFIGS:
+                raise ValueError(f"unknown algorithm {algo!r}; choose from {tuple(AGENT_CONFIGS)}")
+            spec = task_of(Trial(task, algo, 0).env_id)
+            if spec is not None and spec.continuous != (algo in CONTINUOUS_ALGORITHMS):
                 continue
             trials.extend(Trial(task, algo, seed, preset, dict(overrides)) for seed in seeds)
     if not trials:
@@ -151,7 +158,7 @@ def _sweep_on_ray(trials, root: Path, address, cpus_per_trial: float, max_failur
         trial = Trial(**fields)
         torch.set_num_threads(fields["overrides"]["threads"])
         run_dir = run_trial(trial, space["root"])
-        from tactile_braille.agents.train import read_progress
+        from tactile_braille.agents.training import read_progress
 
         rows = read_progress(run_dir)
         tune.report({"test_return": rows[-1]["test/episodic_return"], "epochs": len(rows)})

@@ -1,28 +1,39 @@
-"""The paper's agents with Hindsight Experience Replay: double + dueling DQN, discrete SAC, SAC, TD3."""
+"""The paper's agents with Hindsight Experience Replay: double + dueling DQN, discrete SAC, SAC, TD3.
 
-from tactile_braille.agents.dqn import DQNAgent, DQNConfig
-from tactile_braille.agents.presets import PRESETS, preset_config
-from tactile_braille.agents.replay import EpisodeReplayBuffer
-from tactile_braille.agents.sac import SACAgent, SACConfig
-from tactile_braille.agents.sac_discrete import DiscreteSACAgent, DiscreteSACConfig
-from tactile_braille.agents.td3 import TD3Agent, TD3Config
-from tactile_braille.agents.train import AGENTS, TrainConfig, evaluate, read_progress, train
+Names are imported on first use, so that ``tactile_braille.agents.config`` (the
+settings, which the command line is generated from) loads without torch.
+"""
 
-__all__ = [
-    "AGENTS",
-    "PRESETS",
-    "DQNAgent",
-    "DQNConfig",
-    "DiscreteSACAgent",
-    "DiscreteSACConfig",
-    "EpisodeReplayBuffer",
-    "SACAgent",
-    "SACConfig",
-    "TD3Agent",
-    "TD3Config",
-    "TrainConfig",
-    "evaluate",
-    "preset_config",
-    "read_progress",
-    "train",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "AGENTS": "training",
+    "train": "training",
+    "make_agent": "training",
+    "make_env": "training",
+    "evaluate": "rollout",
+    "run_episode": "rollout",
+    "read_progress": "run",
+    "EpisodeReplayBuffer": "replay",
+    "PRESETS": "presets",
+    "preset_config": "presets",
+    "TrainConfig": "config",
+    "DQNConfig": "config",
+    "DiscreteSACConfig": "config",
+    "SACConfig": "config",
+    "TD3Config": "config",
+    "DQNAgent": "dqn",
+    "DiscreteSACAgent": "sac_discrete",
+    "SACAgent": "sac",
+    "TD3Agent": "td3",
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)

@@ -16,26 +16,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-PRECISIONS = ("fp32", "bf16")
-
-
-def check_hyperparameters(config) -> None:
-    """Refuse hyperparameters no algorithm can use (called by each config's ``__post_init__``)."""
-    problems = []
-    if getattr(config, "batch_size", 1) < 1:
-        problems.append(f"batch_size must be at least 1, got {config.batch_size}")
-    if not 0.0 <= getattr(config, "gamma", 0.0) <= 1.0:
-        problems.append(f"gamma must be in [0, 1], got {config.gamma}")
-    if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
-        problems.append(f"tau must be in (0, 1], got {config.tau}")
-    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha"):
-        if getattr(config, name, 1.0) <= 0:
-            problems.append(f"{name} must be positive, got {getattr(config, name)}")
-    hidden = getattr(config, "hidden", (1,))
-    if not hidden or min(hidden) < 1:
-        problems.append(f"hidden needs at least one positive layer size, got {hidden}")
-    if problems:
-        raise ValueError(f"{type(config).__name__}: " + "; ".join(problems))
+from tactile_braille.agents.config import PRECISIONS
 
 
 def spaces_sizes(observation_space: gym.spaces.Dict) -> tuple[int, int]:
@@ -74,15 +55,6 @@ def critic_poses(batch: dict[str, torch.Tensor], wanted: bool) -> tuple[tuple, t
             "critic_pose needs batches with 'poses' and 'next_poses' (a replay made with poses=True)"
         )
     return (batch["poses"],), (batch["next_poses"],)
-
-
-def adam(parameters, learning_rate: float) -> torch.optim.Adam:
-    """Adam, fused when the parameters' device supports it (CPU and CUDA do in PyTorch >= 2.4)."""
-    parameters = list(parameters)
-    try:
-        return torch.optim.Adam(parameters, lr=learning_rate, fused=True)
-    except (RuntimeError, ValueError):  # device without a fused kernel
-        return torch.optim.Adam(parameters, lr=learning_rate)
 
 
 class Agent:

@@ -8,47 +8,16 @@ argmax, evaluated by a Polyak-averaged target network).
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
 import torch
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
+from tactile_braille.agents.common import Agent, network_options, spaces_sizes
+from tactile_braille.agents.config import DQNConfig
 from tactile_braille.agents.networks import DuelingQNetwork, observation_tensors, soft_update
-
-
-@dataclass(frozen=True)
-class DQNConfig:
-    """Hyperparameters (defaults: the paper's Table II).
-
-    Attributes:
-        gamma: discount.
-        learning_rate: Adam's step size.
-        tau: Polyak factor of the soft target update (per update).
-        epsilon_start, epsilon_end: exploration at the start and end of the schedule.
-        epsilon_decay_steps: environment steps over which epsilon decays linearly.
-        test_epsilon: exploration during test episodes (the paper: 0, deterministic;
-            the released code: 0.05).
-        batch_size: transitions per update.
-        hidden: units of the dense layers after the encoder.
-        layer_norm: LayerNorm in the Q-network's dense layers (as DroQ's critics).
-    """
-
-    gamma: float = 0.95
-    learning_rate: float = 5e-4
-    tau: float = 0.005
-    epsilon_start: float = 1.0
-    epsilon_end: float = 0.1
-    epsilon_decay_steps: int = 2000
-    test_epsilon: float = 0.0
-    batch_size: int = 32
-    hidden: tuple[int, ...] = (512,)
-    layer_norm: bool = False
-
-    def __post_init__(self) -> None:
-        check_hyperparameters(self)
+from tactile_braille.supervised.fit import adam
 
 
 class DQNAgent(Agent):

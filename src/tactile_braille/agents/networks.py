@@ -1,15 +1,17 @@
 """The paper's networks: an Atari-style encoder with the goal and previous action joined after it.
 
 Encoder: conv 32/64/64 filters, kernels 8/4/3, strides 4/2/1, ReLU, no pooling,
-on the 100x100x1 tactile image (5,184 features). The goal one-hot, the
-previous action (and, for continuous critics, the action) are concatenated to
-the features, then dense layers (the paper's single layer of 512 units; the
-released continuous SAC used 1024 then 512). Weights use variance-scaling (He)
-initialisation; output layers start near zero.
+on the 100x100x1 tactile image (5,184 features); it is
+:class:`tactile_braille.supervised.networks.Encoder`, the paper's convolutions
+written once for the classifier, the touch encoder and the agents. The goal
+one-hot, the previous action (and, for continuous critics, the action) are
+concatenated to the features, then dense layers (the paper's single layer of
+512 units; the released continuous SAC used 1024 then 512). Weights use
+variance-scaling (He) initialisation; output layers start near zero.
 
 On *features* (``features=n``: the observation is already a vector of ``n``
 features, such as those of a pretrained touch encoder,
-:mod:`~tactile_braille.agents.touch`) the encoder is left out and the
+:mod:`~tactile_braille.supervised.touch`) the encoder is left out and the
 vectors join the features directly. ``layer_norm=True`` puts a LayerNorm
 before each dense ReLU (as DroQ's critics), for high update-to-data ratios.
 
@@ -30,38 +32,9 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-IMAGE_FEATURES = 64 * 9 * 9
+from tactile_braille.supervised.networks import Encoder, he_init
+
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
-
-
-def _init(module: nn.Module) -> None:
-    if isinstance(module, nn.Conv2d | nn.Linear):
-        nn.init.kaiming_normal_(module.weight, nonlinearity="relu")
-        nn.init.zeros_(module.bias)
-
-
-class Encoder(nn.Module):
-    """Conv 32/64/64 (8/4/3, strides 4/2/1) over a (B, 1, 100, 100) uint8 or float image."""
-
-    output_size = IMAGE_FEATURES
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.layers = nn.Sequential(
-            nn.Conv2d(1, 32, 8, stride=4),
-            nn.ReLU(),
-            nn.Conv2d(32, 64, 4, stride=2),
-            nn.ReLU(),
-            nn.Conv2d(64, 64, 3, stride=1),
-            nn.ReLU(),
-            nn.Flatten(),
-        )
-        self.apply(_init)
-
-    def forward(self, images: torch.Tensor) -> torch.Tensor:
-        if images.dtype == torch.uint8:
-            images = images.float().div_(255.0)
-        return self.layers(images)
 
 
 class GoalConditionedTrunk(nn.Module):
@@ -104,7 +77,7 @@ class GoalConditionedTrunk(nn.Module):
                 nn.ReLU(),
             ]
         self.dense = nn.Sequential(*layers)
-        self.dense.apply(_init)
+        self.dense.apply(he_init)
         self.features = sizes[-1]
 
     def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:

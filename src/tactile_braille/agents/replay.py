@@ -1,14 +1,33 @@
 """Episode replay with the paper's Hindsight Experience Replay, storing each image once.
 
-Images are bit-packed (100x100 binary -> 1,250 bytes) in a ring of *frames*;
-transitions only hold the indices of their two frames, so an image shared by
-two transitions, or by a transition and its hindsight copy, is stored once.
+:class:`EpisodeReplayBuffer` records goal-conditioned episodes and samples
+batches of their transitions. It is made of three parts, in this order below:
 
-HER as released with the paper: when an episode ends because a WRONG key was
-pressed, every transition of the episode is stored again with the pressed key
-as the goal and the final reward set to 1. Time-outs are not relabelled (the
-achieved goal exists only at the final step, so the usual 'future' strategy
-does not apply). ``her=False`` turns it off.
+- :class:`FrameStore`, a ring of *frames*: the observations, each stored
+  once, with the *labels* a robot knows of a tap without touch (sensor pose,
+  pressed key, key under the sensor). Binary (H, W, 1) images are bit-packed
+  (100x100 -> 1,250 bytes), feature vectors (``observation_shape=(n,)``) are
+  stored as float32. Transitions only hold the slots of their two frames, so
+  an image shared by two transitions, or by a transition and its hindsight
+  copy, is stored once.
+- A relabelling strategy (:class:`Relabelling`), chosen by name, with two
+  hooks: the transitions an episode adds when it ends, and how the goals and
+  rewards of sampled transitions are rewritten.
+- :class:`FeatureCache`: given an *encoder* (:meth:`EpisodeReplayBuffer.set_encoder`),
+  batches of an image buffer hold its features of the stored images, kept in a
+  cache that :meth:`~EpisodeReplayBuffer.set_encoder` recomputes when the encoder
+  changes (a touch encoder refitted on the labelled frames,
+  :mod:`~tactile_braille.agents.touch`).
+
+The buffer itself keeps the transitions (frame slots, previous actions, goals,
+actions, rewards, dones, pressed keys) and writes and reads checkpoints.
+
+HER as released with the paper (``relabel="paper"``): when an episode ends
+because a WRONG key was pressed, every transition of the episode is stored
+again with the pressed key as the goal and the final reward set to 1.
+Time-outs are not relabelled (the achieved goal exists only at the final
+step, so the usual 'future' strategy does not apply). ``her=False`` turns
+relabelling off.
 
 ``relabel="all"`` (ours, not the paper's) relabels when sampling instead:
 the reward of a press depends only on which key was pressed and which was
@@ -19,14 +38,6 @@ that ended in a press of a task key, right or wrong), or a uniformly random
 goal (a press of key k then teaches "not here" for the other goals). No
 copies are stored.
 
-Observations are tactile images or feature vectors (``observation_shape=(n,)``,
-stored as float32). Each stored frame may carry *labels*, what a robot knows
-of a tap without touch (sensor pose, pressed key, key under the sensor), and
-an image buffer may be given an *encoder* (:meth:`set_encoder`): batches then
-hold its features of the stored images, kept in a cache that
-:meth:`set_encoder` recomputes when the encoder changes (a touch encoder
-refitted on the labelled frames, :mod:`~tactile_braille.agents.touch`).
-
 Memory at the paper's capacity of 100,000 transitions: the frame ring holds
 twice as many frames as transitions (episodes of one step need two frames
 per transition) plus room for the episode in progress (whose frames are
@@ -36,17 +47,21 @@ written before its transitions are committed), about 200,000 x 1,250 bytes
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
 from tactile_braille._io import atomic_path
 
 PACKED_BYTES = 100 * 100 // 8
-RELABELLING = ("paper", "all")
+"""Bytes of a packed frame of the default 100x100 image."""
 FRAME_LABELS = 5
 """Labels of a frame: sensor x, y, depth (mm), pressed key, key under the sensor."""
+
+Encoder = Callable[[np.ndarray], np.ndarray]
+"""(B, 1, H, W) uint8 images -> (B, size) float32 features."""
 
 
 def _goal_index(one_hot: np.ndarray) -> int:
@@ -54,6 +69,257 @@ def _goal_index(one_hot: np.ndarray) -> int:
     return int(one_hot.argmax()) if one_hot.any() else -1
 
 
+# ================================================================= frames
+class FrameStore:
+    """A ring of observations, each with its labels (NaN where a frame came without).
+
+    Args:
+        capacity: frames kept (the oldest are overwritten).
+        observation_shape: ``(H, W, 1)`` for binary images, bit-packed to
+            ``ceil(H * W / 8)`` bytes (pixels above 127 are 1) and handed back as
+            (B, 1, H, W) uint8 images of 0 and 255; ``(n,)`` for float32 vectors.
+    """
+
+    def __init__(self, capacity: int, observation_shape: tuple[int, ...] = (100, 100, 1)) -> None:
+        shape = tuple(observation_shape)
+        self.images = len(shape) == 3 and shape[2] == 1 and shape[0] >= 1 and shape[1] >= 1
+        if not self.images and len(shape) != 1:
+            raise ValueError(
+                f"observations must be (H, W, 1) binary images or vectors, got {observation_shape}"
+            )
+        self.capacity = int(capacity)
+        if self.images:
+            self.image_shape = (1, int(shape[0]), int(shape[1]))
+            self.pixels = self.image_shape[1] * self.image_shape[2]
+            self.frames = np.zeros((self.capacity, -(-self.pixels // 8)), dtype=np.uint8)
+        else:
+            self.frames = np.zeros((self.capacity, shape[0]), dtype=np.float32)
+        # Per frame: sensor x, y, depth (mm), pressed key, key under the sensor (goal indices, -1 none).
+        self.labels = np.full((self.capacity, FRAME_LABELS), np.nan, dtype=np.float32)
+        self.next_frame = 0
+        self.frames_written = 0
+        self.committed = (0, 0)  # (next_frame, frames_written) at the last commit: what a checkpoint keeps
+
+    def store(self, observation: np.ndarray, label: np.ndarray | None = None) -> int:
+        """Store one observation (and its labels, if known); returns its slot."""
+        slot = self.next_frame
+        if self.images:
+            self.frames[slot] = np.packbits(np.asarray(observation).reshape(-1) > 127)
+        else:
+            self.frames[slot] = observation
+        self.labels[slot] = np.nan if label is None else label
+        self.next_frame = (self.next_frame + 1) % self.capacity
+        self.frames_written += 1
+        return slot
+
+    def commit(self) -> None:
+        """Mark the frames written so far as those a checkpoint keeps."""
+        self.committed = (self.next_frame, self.frames_written)
+
+    def observations(self, slots: np.ndarray) -> np.ndarray:
+        """The observations of ``slots`` (1-D): images (B, 1, H, W) uint8, or vectors (B, n)."""
+        if not self.images:
+            return self.frames[slots]
+        bits = np.unpackbits(self.frames[slots], axis=-1, count=self.pixels)
+        return (bits.reshape(len(slots), *self.image_shape) * 255).astype(np.uint8)
+
+    def written_slots(self) -> np.ndarray:
+        """Slots that hold a frame (committed or of the episode in progress)."""
+        return np.arange(min(self.frames_written, self.capacity))
+
+    def labelled(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Images (N, 1, H, W), poses (N, 3), pressed and under-sensor keys (N,) of labelled frames."""
+        if not self.images:
+            raise ValueError("this buffer holds features, not images")
+        written = self.written_slots()
+        slots = written[~np.isnan(self.labels[written, 0])]
+        labels = self.labels[slots]
+        return (
+            self.observations(slots),
+            labels[:, :3],
+            labels[:, 3].astype(np.int64),
+            labels[:, 4].astype(np.int64),
+        )
+
+    # checkpoints: the committed frames and their labels; the counters are written by the buffer
+    def checkpoint(self) -> tuple[tuple[int, int], dict[str, np.ndarray]]:
+        """The committed counters (next_frame, frames_written) and the arrays of the committed frames."""
+        kept = min(self.committed[1], self.capacity)
+        return self.committed, {"frames": self.frames[:kept], "frame_labels": self.labels[:kept]}
+
+    def read_checkpoint(
+        self, data: Mapping[str, np.ndarray], path: str | Path
+    ) -> dict[str, np.ndarray | None]:
+        """The checkpoint's frame arrays, checked to fit this store (which is left unchanged).
+
+        Files written before frames had labels give ``frame_labels`` None.
+        """
+        if "frame_capacity" not in data or int(data["frame_capacity"]) != self.capacity:
+            raise ValueError(
+                f"{path}: written by a buffer with another frame ring "
+                "(its capacity or max_episode_steps differ)"
+            )
+        frames = data["frames"]
+        if frames.shape[1:] != self.frames.shape[1:] or len(frames) > self.capacity:
+            raise ValueError(f"{path}: frames of shape {frames.shape} does not fit {self.frames.shape}")
+        labels = data.get("frame_labels")
+        if labels is not None and (labels.shape[1:] != self.labels.shape[1:] or len(labels) > self.capacity):
+            raise ValueError(f"{path}: frame_labels of shape {labels.shape} does not fit {self.labels.shape}")
+        return {"frames": frames, "frame_labels": labels}
+
+    def restore(self, arrays: dict[str, np.ndarray | None], next_frame: int, frames_written: int) -> None:
+        """Take the arrays of :meth:`read_checkpoint` and the counters; they become the committed frames."""
+        frames, labels = arrays["frames"], arrays["frame_labels"]
+        self.frames[: len(frames)] = frames
+        self.labels[:] = np.nan
+        if labels is not None:
+            self.labels[: len(labels)] = labels
+        self.next_frame, self.frames_written = int(next_frame), int(frames_written)
+        self.commit()
+
+
+# ================================================================= features
+class FeatureCache:
+    """An encoder's features of the frames of a :class:`FrameStore` of images.
+
+    Empty (``features`` None) until :meth:`set` is given an encoder; from then
+    on every frame stored should be :meth:`add`-ed.
+    """
+
+    def __init__(self, store: FrameStore) -> None:
+        self.store = store
+        self.features: np.ndarray | None = None  # (store capacity, size) float32
+        self.encode: Encoder | None = None
+
+    def set(self, encode: Encoder, size: int, batch_size: int = 1024) -> None:
+        """Compute ``encode``'s features of every written frame (again, after the encoder changed)."""
+        if not self.store.images:
+            raise ValueError("set_encoder needs a buffer of images")
+        features = np.zeros((self.store.capacity, size), dtype=np.float32)
+        written = self.store.written_slots()
+        for start in range(0, len(written), batch_size):
+            slots = written[start : start + batch_size]
+            features[slots] = encode(self.store.observations(slots))
+        self.features, self.encode = features, encode
+
+    def add(self, slot: int) -> None:
+        """Compute the feature of a newly stored frame (nothing without an encoder)."""
+        if self.encode is not None:
+            self.features[slot] = self.encode(self.store.observations(np.array([slot])))[0]
+
+    def lookup(self, slots: np.ndarray) -> np.ndarray:
+        """The features (B, size) of ``slots``."""
+        return self.features[slots]
+
+
+# ================================================================= relabelling
+class Step(NamedTuple):
+    """One step of the episode in progress, as :meth:`EpisodeReplayBuffer.add_step` recorded it."""
+
+    frames: tuple[int, int]  # slots of the observation and the next observation
+    previous: tuple[np.ndarray, np.ndarray]  # previous-action vectors of both
+    goal: np.ndarray  # the desired goal one-hot
+    action: Any
+    reward: float
+    done: float
+    achieved: np.ndarray  # the achieved goal one-hot (zero: no key of the task pressed)
+
+
+class Relabelling:
+    """No relabelling (``her=False``): an episode adds its own transitions, batches keep their goals.
+
+    A relabelling strategy has two hooks: :meth:`episode_end` (extra transitions
+    an ending episode adds) and :meth:`sampled` (goals and rewards of sampled
+    transitions).
+    """
+
+    name: ClassVar[str] = "none"
+
+    def episode_end(self, episode: list[Step]) -> list[tuple[Step, np.ndarray, float]]:
+        """Extra transitions of an ending episode, as (step, goal, reward), stored after its own."""
+        return []
+
+    def sampled(
+        self,
+        goals: np.ndarray,
+        rewards: np.ndarray,
+        achieved: np.ndarray,
+        finals: np.ndarray,
+        rng: np.random.Generator,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Goals (B, goal_size) and rewards (B,) of sampled transitions, from their stored goals and
+        rewards, the goal indices of their pressed keys and of their episodes' final keys (-1: none)."""
+        return goals, rewards
+
+
+class PaperRelabelling(Relabelling):
+    """The paper's HER: a wrong-press episode is stored again with the pressed key as its goal."""
+
+    name: ClassVar[str] = "paper"
+
+    def episode_end(self, episode: list[Step]) -> list[tuple[Step, np.ndarray, float]]:
+        if not episode:
+            return []
+        last = episode[-1]
+        wrong_press = last.achieved.any() and not np.array_equal(last.achieved, last.goal)
+        if not wrong_press:
+            return []
+        return [
+            (step, last.achieved, 1.0 if i == len(episode) - 1 else 0.0) for i, step in enumerate(episode)
+        ]
+
+
+class SampledRelabelling(Relabelling):
+    """Relabelling of every transition when sampled (``relabel="all"``).
+
+    A sampled transition takes its episode's pressed key with probability
+    ``final`` (when its episode ended in a press of a task key), a uniformly
+    random goal with probability ``random``, or else keeps its goal; its
+    reward is 1 where its pressed key is its goal.
+    """
+
+    name: ClassVar[str] = "all"
+
+    def __init__(self, final: float, random: float) -> None:
+        self.final, self.random = float(final), float(random)
+
+    def sampled(
+        self,
+        goals: np.ndarray,
+        rewards: np.ndarray,
+        achieved: np.ndarray,
+        finals: np.ndarray,
+        rng: np.random.Generator,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        batch, goal_size = goals.shape
+        goal = np.where(goals.any(-1), goals.argmax(-1), -1)
+        draw = rng.random(batch)
+        final = finals.astype(np.int64)
+        to_final = (draw < self.final) & (final >= 0)
+        to_random = (draw >= self.final) & (draw < self.final + self.random)
+        goal = np.where(to_final, final, goal)
+        goal = np.where(to_random, rng.integers(goal_size, size=batch), goal)
+        relabelled = np.zeros((batch, goal_size), dtype=np.float32)
+        has_goal = goal >= 0
+        relabelled[np.flatnonzero(has_goal), goal[has_goal]] = 1.0
+        return relabelled, ((achieved == goal) & has_goal).astype(np.float32)
+
+
+RELABELLINGS: dict[str, type[Relabelling]] = {"paper": PaperRelabelling, "all": SampledRelabelling}
+RELABELLING = tuple(RELABELLINGS)
+"""The names ``relabel`` takes."""
+
+
+def make_relabelling(relabel: str, her: bool = True, final: float = 0.4, random: float = 0.4) -> Relabelling:
+    """The strategy named ``relabel`` (one of :data:`RELABELLING`), or none when ``her`` is off."""
+    if relabel not in RELABELLINGS:
+        raise ValueError(f"relabel must be one of {RELABELLING}, got {relabel!r}")
+    if not her:
+        return Relabelling()
+    return SampledRelabelling(final, random) if relabel == "all" else RELABELLINGS[relabel]()
+
+
+# ================================================================= the buffer
 class EpisodeReplayBuffer:
     """Transitions of goal-conditioned episodes, with hindsight relabelling.
 
@@ -69,8 +335,8 @@ class EpisodeReplayBuffer:
             ``"all"`` (relabel when sampling, see above).
         relabel_final, relabel_random: with ``"all"``, the probabilities that
             a sampled transition takes its episode's pressed key, or a random goal.
-        observation_shape: ``(100, 100, 1)`` for images (bit-packed), ``(n,)``
-            for feature vectors.
+        observation_shape: ``(H, W, 1)`` for binary images (bit-packed; ``(100, 100, 1)``
+            by default), ``(n,)`` for feature vectors.
         poses: batches also carry the labelled sensor poses (x, y, depth in mm) of
             both frames, ``poses`` and ``next_poses``, for asymmetric critics.
     """
@@ -100,22 +366,18 @@ class EpisodeReplayBuffer:
                 f"relabel_final={relabel_final} and relabel_random={relabel_random} must be "
                 "probabilities that sum to at most 1"
             )
-        self.images = tuple(observation_shape) == (100, 100, 1)
-        if not self.images and len(observation_shape) != 1:
-            raise ValueError(f"observations must be 100x100x1 images or vectors, got {observation_shape}")
         self.capacity = int(capacity)
         self.poses = bool(poses)
         self.her = her
         self.relabel = relabel
         self.relabel_final, self.relabel_random = float(relabel_final), float(relabel_random)
+        self.relabelling = make_relabelling(relabel, her, relabel_final, relabel_random)
         self.goal_size = int(goal_size)
         self.max_episode_steps = int(max_episode_steps)
         # Committed transitions use at most 2 frames each; the episode in progress adds its own.
-        self.frame_capacity = 2 * self.capacity + self.max_episode_steps + 1
-        if self.images:
-            self.frames = np.zeros((self.frame_capacity, PACKED_BYTES), dtype=np.uint8)
-        else:
-            self.frames = np.zeros((self.frame_capacity, observation_shape[0]), dtype=np.float32)
+        self.store = FrameStore(2 * self.capacity + self.max_episode_steps + 1, observation_shape)
+        self.cache = FeatureCache(self.store)
+        # The transitions.
         self.frame_index = np.zeros((self.capacity, 2), dtype=np.int64)  # (this, next)
         self.previous_actions = np.zeros((self.capacity, 2, previous_action_size), dtype=np.float32)
         self.goals = np.zeros((self.capacity, goal_size), dtype=np.float32)
@@ -126,32 +388,59 @@ class EpisodeReplayBuffer:
         # Goal index of the key pressed at the step, and at the end of its episode (-1: none).
         self.achieved = np.full(self.capacity, -1, dtype=np.int16)
         self.finals = np.full(self.capacity, -1, dtype=np.int16)
-        self.next_frame = 0
-        self.frames_written = 0
-        # Per frame: sensor x, y, depth (mm), pressed key, key under the sensor (goal indices, -1 none);
-        # NaN where a frame came without labels.
-        self.frame_labels = np.full((self.frame_capacity, FRAME_LABELS), np.nan, dtype=np.float32)
-        self.features: np.ndarray | None = None  # the encoder's features of the frames (set_encoder)
-        self._encode = None
-        self._committed = (0, 0)  # (next_frame, frames_written) after the last committed episode
         self.next_slot = 0
         self.size = 0
-        self._episode: list[dict] = []
+        # The episode in progress.
+        self._episode: list[Step] = []
         self._current_frame = -1
         self._current_previous_action: np.ndarray | None = None
 
+    # the frame store's and the cache's state, under the names the buffer always had
+    @property
+    def images(self) -> bool:
+        """Whether observations are images (else feature vectors)."""
+        return self.store.images
+
+    @property
+    def frames(self) -> np.ndarray:
+        """The frame ring: packed images (frame_capacity, bytes) uint8, or vectors (frame_capacity, n)."""
+        return self.store.frames
+
+    @property
+    def frame_labels(self) -> np.ndarray:
+        """Labels of the frames (frame_capacity, FRAME_LABELS) float32, NaN where unknown."""
+        return self.store.labels
+
+    @property
+    def frame_capacity(self) -> int:
+        return self.store.capacity
+
+    @property
+    def next_frame(self) -> int:
+        return self.store.next_frame
+
+    @property
+    def frames_written(self) -> int:
+        return self.store.frames_written
+
+    @property
+    def features(self) -> np.ndarray | None:
+        """The encoder's features of the frames, None without an encoder (batches then hold images)."""
+        return self.cache.features
+
+    @features.setter
+    def features(self, features: np.ndarray | None) -> None:
+        # A new cache, not a change to the shared one: a shallow copy of the buffer set to sample
+        # images (``copy.copy(buffer).features = None``) leaves the original's cache alone.
+        cache = FeatureCache(self.store)
+        if features is not None:
+            cache.features, cache.encode = features, self.cache.encode
+        self.cache = cache
+
     # --------------------------------------------------------- writing
     def _store_frame(self, image: np.ndarray, label: np.ndarray | None = None) -> int:
-        slot = self.next_frame
-        if self.images:
-            self.frames[slot] = np.packbits(np.asarray(image).reshape(-1) > 127)
-        else:
-            self.frames[slot] = image
-        self.frame_labels[slot] = np.nan if label is None else label
-        if self._encode is not None:
-            self.features[slot] = self._encode(self._images(np.array([slot])))[0]
-        self.next_frame = (self.next_frame + 1) % self.frame_capacity
-        self.frames_written += 1
+        slot = self.store.store(image, label)
+        self.cache.add(slot)
         return slot
 
     def start_episode(self, observation: dict[str, np.ndarray], label: np.ndarray | None = None) -> None:
@@ -178,64 +467,54 @@ class EpisodeReplayBuffer:
         next_frame = self._store_frame(next_observation["observation"], label)
         next_previous = np.asarray(next_observation["previous_action"], dtype=np.float32)
         self._episode.append(
-            {
-                "frames": (self._current_frame, next_frame),
-                "previous": (self._current_previous_action, next_previous),
-                "goal": np.asarray(next_observation["desired_goal"], dtype=np.float32),
-                "action": action,
-                "reward": float(reward),
-                "done": float(terminated),
-                "achieved": np.asarray(next_observation["achieved_goal"], dtype=np.float32),
-            }
+            Step(
+                frames=(self._current_frame, next_frame),
+                previous=(self._current_previous_action, next_previous),
+                goal=np.asarray(next_observation["desired_goal"], dtype=np.float32),
+                action=action,
+                reward=float(reward),
+                done=float(terminated),
+                achieved=np.asarray(next_observation["achieved_goal"], dtype=np.float32),
+            )
         )
         self._current_frame, self._current_previous_action = next_frame, next_previous
 
     def end_episode(self) -> None:
-        """Commit the episode's transitions, and their hindsight copies (the paper's HER)."""
-        final = _goal_index(self._episode[-1]["achieved"]) if self._episode else -1
+        """Commit the episode's transitions, and those its relabelling adds (the paper's HER)."""
+        final = _goal_index(self._episode[-1].achieved) if self._episode else -1
         for step in self._episode:
-            self._add(step, step["goal"], step["reward"], final)
-        if self.her and self.relabel == "paper" and self._episode:
-            last = self._episode[-1]
-            wrong_press = last["achieved"].any() and not np.array_equal(last["achieved"], last["goal"])
-            if wrong_press:
-                for i, step in enumerate(self._episode):
-                    self._add(step, last["achieved"], 1.0 if i == len(self._episode) - 1 else 0.0, final)
+            self._add(step, step.goal, step.reward, final)
+        for step, goal, reward in self.relabelling.episode_end(self._episode):
+            self._add(step, goal, reward, final)
         self._episode = []
         self._current_frame = -1
-        self._committed = (self.next_frame, self.frames_written)
+        self.store.commit()
 
-    def _add(self, step: dict, goal: np.ndarray, reward: float, final: int) -> None:
+    def _add(self, step: Step, goal: np.ndarray, reward: float, final: int) -> None:
         slot = self.next_slot
-        self.achieved[slot] = _goal_index(step["achieved"])
+        self.achieved[slot] = _goal_index(step.achieved)
         self.finals[slot] = final
-        self.frame_index[slot] = step["frames"]
-        self.previous_actions[slot, 0] = step["previous"][0]
-        self.previous_actions[slot, 1] = step["previous"][1]
+        self.frame_index[slot] = step.frames
+        self.previous_actions[slot, 0] = step.previous[0]
+        self.previous_actions[slot, 1] = step.previous[1]
         self.goals[slot] = goal
-        self.actions[slot] = step["action"]
+        self.actions[slot] = step.action
         self.rewards[slot] = reward
-        self.dones[slot] = step["done"]
+        self.dones[slot] = step.done
         self.next_slot = (self.next_slot + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
 
     # --------------------------------------------------------- reading
-    def _images(self, frames: np.ndarray) -> np.ndarray:
-        if not self.images:
-            return self.frames[frames]
-        bits = np.unpackbits(self.frames[frames], axis=-1)
-        return (bits.reshape(len(frames), 1, 100, 100) * 255).astype(np.uint8)
-
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """A uniform batch of transitions (images as (B, 1, 100, 100) uint8, or features (B, n))."""
+        """A uniform batch of transitions (images as (B, 1, H, W) uint8, or features (B, n))."""
         if self.size == 0:
             raise RuntimeError("the replay buffer is empty")
         index = rng.integers(self.size, size=batch_size)
         frames = self.frame_index[index]
-        goals, rewards = self.goals[index], self.rewards[index]
-        if self.her and self.relabel == "all":
-            goals, rewards = self._relabel(index, rng)
-        observations = self._images if self.features is None else self.features.__getitem__
+        goals, rewards = self.relabelling.sampled(
+            self.goals[index], self.rewards[index], self.achieved[index], self.finals[index], rng
+        )
+        observations = self.store.observations if self.cache.features is None else self.cache.lookup
         batch = {
             "images": observations(frames[:, 0]),
             "previous_actions": self.previous_actions[index, 0],
@@ -247,69 +526,31 @@ class EpisodeReplayBuffer:
             "dones": self.dones[index],
         }
         if self.poses:
-            poses = self.frame_labels[frames, :3]  # (B, 2, 3)
+            poses = self.store.labels[frames, :3]  # (B, 2, 3)
             if np.isnan(poses).any():
                 raise RuntimeError("poses=True needs labelled frames, but a sampled frame has no labels")
             batch["poses"], batch["next_poses"] = poses[:, 0], poses[:, 1]
         return batch
 
-    def _relabel(self, index: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Goals and rewards of sampled transitions under ``relabel="all"``."""
-        goal = self.goals[index].argmax(-1)
-        goal = np.where(self.goals[index].any(-1), goal, -1)
-        draw = rng.random(len(index))
-        final = self.finals[index].astype(np.int64)
-        to_final = (draw < self.relabel_final) & (final >= 0)
-        to_random = (draw >= self.relabel_final) & (draw < self.relabel_final + self.relabel_random)
-        goal = np.where(to_final, final, goal)
-        goal = np.where(to_random, rng.integers(self.goal_size, size=len(index)), goal)
-        goals = np.zeros((len(index), self.goal_size), dtype=np.float32)
-        has_goal = goal >= 0
-        goals[np.flatnonzero(has_goal), goal[has_goal]] = 1.0
-        rewards = ((self.achieved[index] == goal) & has_goal).astype(np.float32)
-        return goals, rewards
-
-    def _written_frames(self) -> np.ndarray:
-        """Slots that hold a frame (committed or of the episode in progress)."""
-        return np.arange(min(self.frames_written, self.frame_capacity))
-
-    def set_encoder(self, encode, size: int, batch_size: int = 1024) -> None:
+    def set_encoder(self, encode: Encoder, size: int, batch_size: int = 1024) -> None:
         """From now on, batches hold ``encode``'s features of the stored images (recomputed now).
 
-        ``encode`` takes (B, 1, 100, 100) uint8 images and returns (B, size)
+        ``encode`` takes (B, 1, H, W) uint8 images and returns (B, size)
         float32 features. Call it again after the encoder changed.
         """
-        if not self.images:
-            raise ValueError("set_encoder needs a buffer of images")
-        features = np.zeros((self.frame_capacity, size), dtype=np.float32)
-        written = self._written_frames()
-        for start in range(0, len(written), batch_size):
-            frames = written[start : start + batch_size]
-            features[frames] = encode(self._images(frames))
-        self.features, self._encode = features, encode
+        self.cache.set(encode, size, batch_size)
 
     def labelled_frames(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Images (N, 1, 100, 100), poses (N, 3), pressed and under-sensor keys (N,) of labelled frames."""
-        if not self.images:
-            raise ValueError("this buffer holds features, not images")
-        written = self._written_frames()
-        frames = written[~np.isnan(self.frame_labels[written, 0])]
-        labels = self.frame_labels[frames]
-        return (
-            self._images(frames),
-            labels[:, :3],
-            labels[:, 3].astype(np.int64),
-            labels[:, 4].astype(np.int64),
-        )
+        """Images (N, 1, H, W), poses (N, 3), pressed and under-sensor keys (N,) of labelled frames."""
+        return self.store.labelled()
 
     # ------------------------------------------------------ checkpoints
-    _ARRAYS = (
-        "frames", "frame_index", "previous_actions", "goals", "actions", "rewards", "dones",
-        "achieved", "finals",
+    _TRANSITIONS = (
+        "frame_index", "previous_actions", "goals", "actions", "rewards", "dones", "achieved", "finals",
     )  # fmt: skip
     _ADDED_LATER: ClassVar[dict[str, int]] = {"achieved": -1, "finals": -1}
-    """Arrays that older buffers lack, and their fill value (no key known); older buffers' frames have
-    no labels."""
+    """Transition arrays that older buffers lack, and their fill value (no key known); older buffers'
+    frames have no labels."""
 
     def save(self, path: str | Path) -> None:
         """Write the used part of the buffer (committed transitions) atomically as ``.npz``.
@@ -318,53 +559,37 @@ class EpisodeReplayBuffer:
         those after the last committed episode), so a resumed run has the
         whole slack of the frame ring for its next episode.
         """
-        next_frame, frames_written = self._committed
-        frames = min(frames_written, self.frame_capacity)
-        arrays = {name: getattr(self, name)[: self.size] for name in self._ARRAYS if name != "frames"}
+        (next_frame, frames_written), frames = self.store.checkpoint()
+        transitions = {name: getattr(self, name)[: self.size] for name in self._TRANSITIONS}
         with atomic_path(path, fsync=True) as temporary, open(temporary, "wb") as handle:
             np.savez(
                 handle,
                 counters=np.array([next_frame, frames_written, self.next_slot, self.size]),
-                frame_capacity=np.array(self.frame_capacity),
-                frames=self.frames[:frames],
-                frame_labels=self.frame_labels[:frames],
-                **arrays,
+                frame_capacity=np.array(self.store.capacity),
+                **frames,
+                **transitions,
             )
 
     def load(self, path: str | Path) -> None:
         """Restore a buffer written by :meth:`save` (same capacity and sizes)."""
         with np.load(path) as data:
-            if "frame_capacity" not in data or int(data["frame_capacity"]) != self.frame_capacity:
-                raise ValueError(
-                    f"{path}: written by a buffer with another frame ring "
-                    "(its capacity or max_episode_steps differ)"
-                )
-            size = int(data["counters"][3])
-            stored = {
+            # Check everything before changing anything.
+            frames = self.store.read_checkpoint(data, path)
+            counters = [int(v) for v in data["counters"]]
+            size = counters[3]
+            transitions = {
                 name: data[name] if name in data else np.full(size, self._ADDED_LATER[name], dtype=np.int16)
-                for name in self._ARRAYS
+                for name in self._TRANSITIONS
             }
-            for name, array in stored.items():  # check everything before changing anything
+            for name, array in transitions.items():
                 mine = getattr(self, name)
                 if array.shape[1:] != mine.shape[1:] or len(array) > len(mine):
                     raise ValueError(f"{path}: {name} of shape {array.shape} does not fit {mine.shape}")
-            labels = data.get("frame_labels")
-            if labels is not None and (
-                labels.shape[1:] != self.frame_labels.shape[1:] or len(labels) > self.frame_capacity
-            ):
-                raise ValueError(
-                    f"{path}: frame_labels of shape {labels.shape} does not fit {self.frame_labels.shape}"
-                )
-            for name, array in stored.items():
+            self.store.restore(frames, counters[0], counters[1])
+            for name, array in transitions.items():
                 getattr(self, name)[: len(array)] = array
-            self.frame_labels[:] = np.nan
-            if labels is not None:
-                self.frame_labels[: len(labels)] = labels
-            self.next_frame, self.frames_written, self.next_slot, self.size = (
-                int(v) for v in data["counters"]
-            )
-            self._committed = (self.next_frame, self.frames_written)
+            self.next_slot, self.size = counters[2], counters[3]
         self._episode = []
         self._current_frame = -1
-        if self._encode is not None:
-            self.set_encoder(self._encode, self.features.shape[1])
+        if self.cache.encode is not None:
+            self.set_encoder(self.cache.encode, self.cache.features.shape[1])

@@ -9,7 +9,6 @@ across runs.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -17,7 +16,10 @@ import numpy as np
 import torch
 
 from tactile_braille._io import atomic_path
-from tactile_braille.agents.train import TrainConfig, evaluate, make_agent, make_env, read_progress
+from tactile_braille.agents.rollout import evaluate
+from tactile_braille.agents.run import CHECKPOINT_FILE, read_config, read_progress
+from tactile_braille.agents.training import make_agent, make_env
+from tactile_braille.envs.registry import task_name
 
 
 def convergence_epoch(
@@ -41,15 +43,16 @@ def convergence_epoch(
     return int(reached[0]) + 1 if reached.size else None
 
 
-def load_run(run_dir: str | Path):
-    """The run's config, a fresh environment, and its agent restored from the last checkpoint."""
+def load_run(run_dir: str | Path, **env_options):
+    """The run's config, a fresh environment (``gym.make`` options in ``env_options``), and its agent
+    restored from the last checkpoint."""
     run_dir = Path(run_dir)
-    config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
-    checkpoint = run_dir / "checkpoint.pt"
+    config = read_config(run_dir)
+    checkpoint = run_dir / CHECKPOINT_FILE
     if not checkpoint.exists():
         raise FileNotFoundError(f"{run_dir} has no checkpoint yet")
     torch.set_num_threads(config.threads)
-    env = make_env(config)
+    env = make_env(config, **env_options)
     agent = make_agent(config, env)
     agent.load_state_dict(torch.load(checkpoint, weights_only=False, map_location=agent.device)["agent"])
     return config, env, agent
@@ -63,15 +66,10 @@ def evaluate_run(run_dir: str | Path, episodes: int = 100, seed: int = 123_456) 
 
 def write_report(run_dir: str | Path, episodes: int = 100) -> Path:
     """Evaluate the run, plot its curve and write ``report.md``; returns the report's path."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from tactile_braille.gallery import save_figure
+    from tactile_braille._figures import new_figure, save_figure
 
     run_dir = Path(run_dir)
-    config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
+    config = read_config(run_dir)
     rows = read_progress(run_dir)
     if not rows:
         raise ValueError(f"{run_dir} has no finished epoch to report")
@@ -80,7 +78,8 @@ def write_report(run_dir: str | Path, episodes: int = 100) -> Path:
     absolute_epoch = convergence_epoch(returns, level=0.95)
     final = evaluate_run(run_dir, episodes)
 
-    fig, ax = plt.subplots(figsize=(6, 3.4))
+    fig, axes = new_figure(figsize=(6, 3.4))
+    ax = axes[0, 0]
     epochs = [int(row["epoch"]) + 1 for row in rows]  # counted from 1, as the paper does
     ax.plot(epochs, returns, marker="o", markersize=3, label="test return (each epoch)")
     train_returns = [row["train/episodic_return"] for row in rows]
@@ -92,7 +91,7 @@ def write_report(run_dir: str | Path, episodes: int = 100) -> Path:
     ax.set_xlabel("epoch (250 steps)")
     ax.set_ylabel("average return")
     ax.set_ylim(-0.05, 1.05)
-    ax.set_title(f"{config.task.split('/')[-1]}, {config.algo}, seed {config.seed}")
+    ax.set_title(f"{task_name(config.task)}, {config.algo}, seed {config.seed}")
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     save_figure(fig, run_dir / "curve.png")
@@ -100,11 +99,11 @@ def write_report(run_dir: str | Path, episodes: int = 100) -> Path:
     def show(epoch: int | None) -> str:
         return "not reached" if epoch is None else str(epoch)
 
-    her = "on" if config.her else "off"
+    her = "on" if config.replay.her else "off"
     minutes = sum(row["time_s"] for row in rows if not math.isnan(row["time_s"])) / 60
     steps, updates = int(rows[-1]["env_steps"]), int(rows[-1]["updates"])
     lines = [
-        f"# {config.task.split('/')[-1]} with {config.algo} (seed {config.seed})",
+        f"# {task_name(config.task)} with {config.algo} (seed {config.seed})",
         "",
         f"Preset `{config.preset}`, {config.precision}, backend `{config.backend}`, HER {her}.",
         "",

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -22,57 +21,18 @@ from torch.nn import functional as F
 from tactile_braille.agents.common import (
     POSE_SIZE,
     Agent,
-    adam,
-    check_hyperparameters,
     critic_poses,
     network_options,
     spaces_sizes,
 )
+from tactile_braille.agents.config import SACConfig
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     GaussianPolicy,
     observation_tensors,
     soft_update,
 )
-
-
-@dataclass(frozen=True)
-class SACConfig:
-    """Hyperparameters (defaults: the paper's Table II).
-
-    Attributes:
-        gamma: discount.
-        learning_rate: actor and critic step size.
-        alpha_learning_rate: temperature step size.
-        initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
-            every step alive, and pressing ends an episode: a high temperature delays the first
-            presses until it has fallen (docs/agents.md).
-        target_entropy: entropy the temperature steers the policy towards
-            (the paper's -6 for a 3-D action; the usual choice is -3).
-        tau: Polyak factor of the target critics (the paper's polyak 0.995).
-        batch_size: transitions per update.
-        hidden: units of the dense layers (the paper's 512; the released code's 1024, 512).
-        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
-        shared_encoder: the actor reuses the first critic's encoder, detached
-            (not the paper's setting; as in SAC-AE and DrQ).
-        critic_pose: asymmetric critics that also see the sensor pose (batches then carry
-            ``poses`` and ``next_poses``); the actor still acts on touch alone.
-    """
-
-    gamma: float = 0.95
-    learning_rate: float = 5e-4
-    alpha_learning_rate: float = 1e-3
-    initial_alpha: float = 1.0
-    target_entropy: float = -6.0
-    tau: float = 0.005
-    batch_size: int = 32
-    hidden: tuple[int, ...] = (512,)
-    layer_norm: bool = False
-    shared_encoder: bool = False
-    critic_pose: bool = False
-
-    def __post_init__(self) -> None:
-        check_hyperparameters(self)
+from tactile_braille.supervised.fit import adam
 
 
 class SACAgent(Agent):

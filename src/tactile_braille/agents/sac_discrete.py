@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -18,45 +17,10 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, adam, check_hyperparameters, network_options, spaces_sizes
+from tactile_braille.agents.common import Agent, network_options, spaces_sizes
+from tactile_braille.agents.config import DiscreteSACConfig
 from tactile_braille.agents.networks import DuelingQNetwork, PolicyNetwork, observation_tensors, soft_update
-
-
-@dataclass(frozen=True)
-class DiscreteSACConfig:
-    """Hyperparameters (defaults: the paper's Table II).
-
-    Attributes:
-        gamma: discount (the paper's 0.6 for discrete SAC).
-        learning_rate: actor and critic step size.
-        alpha_learning_rate: temperature step size.
-        initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
-            every step alive, and pressing ends an episode: a high temperature delays the first
-            presses until it has fallen (docs/agents.md).
-        target_entropy_ratio: target entropy as a share of the maximum,
-            ``ln(num_actions)`` (the released code's 0.1; the paper quotes
-            the resulting 0.139, i.e. 0.1 ln 4).
-        tau: Polyak factor of the target critics (per update).
-        batch_size: transitions per update.
-        hidden: units of the dense layers after the encoder.
-        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
-        shared_encoder: the actor reuses the first critic's encoder, detached
-            (not the paper's setting; as in SAC-AE and DrQ).
-    """
-
-    gamma: float = 0.6
-    learning_rate: float = 5e-4
-    alpha_learning_rate: float = 1e-3
-    initial_alpha: float = 1.0
-    target_entropy_ratio: float = 0.1
-    tau: float = 0.005
-    batch_size: int = 32
-    hidden: tuple[int, ...] = (512,)
-    layer_norm: bool = False
-    shared_encoder: bool = False
-
-    def __post_init__(self) -> None:
-        check_hyperparameters(self)
+from tactile_braille.supervised.fit import adam
 
 
 class DiscreteSACAgent(Agent):

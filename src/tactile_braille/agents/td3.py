@@ -10,7 +10,6 @@ the actor and the Polyak targets every ``policy_delay`` critic updates.
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
 
 import gymnasium as gym
 import numpy as np
@@ -21,12 +20,11 @@ from torch.nn import functional as F
 from tactile_braille.agents.common import (
     POSE_SIZE,
     Agent,
-    adam,
-    check_hyperparameters,
     critic_poses,
     network_options,
     spaces_sizes,
 )
+from tactile_braille.agents.config import TD3Config
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     DeterministicPolicy,
@@ -34,48 +32,7 @@ from tactile_braille.agents.networks import (
     soft_update,
 )
 from tactile_braille.agents.sac import _unit_box_size
-
-
-@dataclass(frozen=True)
-class TD3Config:
-    """Hyperparameters (defaults: the paper's Table II).
-
-    Attributes:
-        gamma: discount.
-        learning_rate: actor and critic step size (the paper's 5e-5; the released code's 7.5e-5).
-        tau: Polyak factor of the targets (the paper's polyak 0.995).
-        noise_start, noise_end: standard deviation of the exploration noise
-            at the start and the end of its linear schedule.
-        noise_decay_steps: environment steps over which the noise decays.
-        test_noise: noise during test episodes (0: deterministic).
-        target_noise: standard deviation of the target-policy smoothing noise.
-        noise_clip: bound of the smoothing noise.
-        policy_delay: critic updates per actor (and target) update.
-        batch_size: transitions per update.
-        hidden: units of the dense layers.
-        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
-        shared_encoder: the actor reuses the first critic's encoder, detached (not the paper's).
-        critic_pose: asymmetric critics that also see the sensor pose (as SAC's).
-    """
-
-    gamma: float = 0.95
-    learning_rate: float = 5e-5
-    tau: float = 0.005
-    noise_start: float = 1.0
-    noise_end: float = 0.05
-    noise_decay_steps: int = 2000
-    test_noise: float = 0.0
-    target_noise: float = 0.05
-    noise_clip: float = 0.2
-    policy_delay: int = 2
-    batch_size: int = 32
-    hidden: tuple[int, ...] = (512,)
-    layer_norm: bool = False
-    shared_encoder: bool = False
-    critic_pose: bool = False
-
-    def __post_init__(self) -> None:
-        check_hyperparameters(self)
+from tactile_braille.supervised.fit import adam
 
 
 class TD3Agent(Agent):

@@ -65,6 +65,39 @@ def _number(row: dict, column: str, source: object) -> float:
         raise DatasetError(f"{source}: column {column} holds {row[column]!r}, not a number") from None
 
 
+def _metadata(
+    csv_name: str, grid_frame: str | None, frame_index: int, processing: ImageProcessing, key_names
+) -> DatasetMetadata:
+    """What an imported dataset records of its origin: the real rig of the original release."""
+    return DatasetMetadata(
+        key_names=key_names,
+        procedure={
+            "procedure": "grid" if grid_frame else "perturbed",
+            "imported_from": csv_name,
+            "grid_frame": grid_frame,
+            "frame_index": frame_index,
+        },
+        keyboard={"source": "DREVO Excalibur 84 with 3D-printed braille keycaps (real)"},
+        sensor={"source": "TacTip, 331 pins (real)", "processing": dataclasses.asdict(processing)},
+        rig="original-release",
+        seed=0,
+        generator_version="original-release",
+    )
+
+
+def _tap(row: dict, grid_frame: str | None, source: str) -> tuple[float, float, float, float, str, str]:
+    """A csv row's tap: x, y, depth (mm, keyboard frame), yaw (deg), its label and the key pressed."""
+    x, y = _parse_pose(row["obj_pose"], source)[:2]  # the tap's yaw is pose_6 (supervised) or 0 (grid)
+    if grid_frame:
+        origin_x, origin_y = work_frame_origin_mm(grid_frame)
+        depth = _number(row, "tap_depth", source) + RIG_TAP_OFFSET_MM
+        return origin_x + x, origin_y + y, depth, 0.0, row["pressed_buttons"], row["pressed_buttons"]
+    x += _number(row, "pose_1", source)
+    y += _number(row, "pose_2", source)
+    depth = SUPERVISED_TAP_DEPTH_MM + _number(row, "pose_3", source)
+    return x, y, depth, _number(row, "pose_6", source), row["obj_lbl"], NONE_KEY
+
+
 def import_original(
     csv_path: str | Path,
     output: str | Path,
@@ -104,20 +137,7 @@ def import_original(
     layout = KeyboardLayout()
     key_names = (*(key.name for key in layout.keys), NONE_KEY)
     name_index = {name: i for i, name in enumerate(key_names)}
-    metadata = DatasetMetadata(
-        key_names=key_names,
-        procedure={
-            "procedure": "grid" if grid_frame else "perturbed",
-            "imported_from": csv_path.name,
-            "grid_frame": grid_frame,
-            "frame_index": frame_index,
-        },
-        keyboard={"source": "DREVO Excalibur 84 with 3D-printed braille keycaps (real)"},
-        sensor={"source": "TacTip, 331 pins (real)", "processing": dataclasses.asdict(processing)},
-        rig="original-release",
-        seed=0,
-        generator_version="original-release",
-    )
+    metadata = _metadata(csv_path.name, grid_frame, frame_index, processing, key_names)
     writer = DatasetWriter(output, metadata, len(rows), resume=resume)
     pending = writer.pending()
     if progress:
@@ -128,20 +148,7 @@ def import_original(
         for index in pending:
             row = rows[index]
             source = f"{csv_path}, row {index + 2}"
-            x, y, _z, _, _, yaw = _parse_pose(row["obj_pose"], source)
-            if grid_frame:
-                origin_x, origin_y = work_frame_origin_mm(grid_frame)
-                x, y = origin_x + x, origin_y + y
-                depth = _number(row, "tap_depth", source) + RIG_TAP_OFFSET_MM
-                pressed = row["pressed_buttons"]
-                label = pressed
-                yaw = 0.0
-            else:
-                x += _number(row, "pose_1", source)
-                y += _number(row, "pose_2", source)
-                depth = SUPERVISED_TAP_DEPTH_MM + _number(row, "pose_3", source)
-                yaw = _number(row, "pose_6", source)
-                label, pressed = row["obj_lbl"], NONE_KEY
+            x, y, depth, yaw, label, pressed = _tap(row, grid_frame, source)
             for key in (label, pressed):
                 if key not in name_index:
                     raise DatasetError(f"{source}: unknown key {key!r}")

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 import numpy as np
 
+from tactile_braille.agents.rollout import run_episode
+from tactile_braille.envs.registry import task_name, task_of
 from tactile_braille.keyboard.layout import ALPHABET_KEYS, ARROW_KEYS
 
 OTHER, NONE = "OTHER", "NONE"
@@ -119,20 +121,15 @@ def type_sequences(agent, env: gym.Env, sequences: list[tuple[str, ...]], seed: 
     for number, sequence in enumerate(result.sequences):
         typed, steps = [], []
         for position, goal in enumerate(sequence):
-            options = {"goal_key": goal, "keep_pose": position > 0}
-            observation, _ = env.reset(seed=seed + number if position == 0 else None, options=options)
-            count, pressed = 0, NONE
-            while True:
-                action = agent.policy_action(observation, 0, explore=False, rng=rng, deterministic=True)
-                observation, _, terminated, truncated, info = env.step(action)
-                count += 1
-                if terminated:
-                    pressed = info["pressed_key"] if info["pressed_key"] in keys else OTHER
-                    break
-                if truncated:
-                    break
+            episode = run_episode(
+                agent, env, rng, seed=seed + number if position == 0 else None,
+                options={"goal_key": goal, "keep_pose": position > 0}, deterministic=True,
+            )  # fmt: skip
+            pressed = NONE
+            if episode.terminated:
+                pressed = episode.info["pressed_key"] if episode.info["pressed_key"] in keys else OTHER
             typed.append(pressed)
-            steps.append(count)
+            steps.append(episode.steps)
         result.typed.append(typed)
         result.steps.append(steps)
     return result
@@ -152,7 +149,7 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
 
     run_dir = Path(run_dir)
     config, env, agent = load_run(run_dir)
-    keys = "alphabet" if "Alphabet" in config.task else "arrows"
+    keys = task_of(config.task).keys
     result = type_sequences(agent, env, paper_sequences(keys), seed=seed)
     import torch
 
@@ -170,7 +167,7 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
             for text, keys_typed, steps in zip(SENTENCES, typed.typed, typed.steps, strict=True)
         ]  # fmt: skip
     save_typing_confusion(result.confusion(), result.keys, result.columns, run_dir / "typing_confusion.png",
-                          f"{config.task.split('/')[-1]}, {config.algo}: accuracy {result.accuracy:.3f}, "
+                          f"{task_name(config.task)}, {config.algo}: accuracy {result.accuracy:.3f}, "
                           f"{result.total_steps} steps")  # fmt: skip
     with atomic_path(run_dir / "typing.json") as temporary:
         temporary.write_text(json.dumps(output, indent=2))
@@ -184,15 +181,11 @@ def _as_text(keys: list[str]) -> str:
 
 def save_typing_confusion(matrix: np.ndarray, keys, columns, path, title: str):
     """The typing confusion matrix as a PNG (rows: goal key; columns: key pressed, OTHER, NONE)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from tactile_braille.gallery import save_figure
+    from tactile_braille._figures import new_figure, save_figure
 
     size = 2.5 + 0.28 * len(columns)
-    fig, ax = plt.subplots(figsize=(size, size * 0.9))
+    fig, axes = new_figure(figsize=(size, size * 0.9))
+    ax = axes[0, 0]
     ax.imshow(np.where(matrix > 0, matrix, np.nan), cmap="viridis", interpolation="nearest")
     ax.set_xticks(range(len(columns)), columns, rotation=90, fontsize=7)
     ax.set_yticks(range(len(keys)), keys, fontsize=7)

@@ -14,7 +14,6 @@ goal at the start, middle and end of training).
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import re
 import textwrap
@@ -25,9 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from tactile_braille._io import atomic_path
+from tactile_braille.agents.config import TrainConfig, flatten
 from tactile_braille.agents.report import convergence_epoch
-from tactile_braille.agents.train import TrainConfig, read_progress, run_world
+from tactile_braille.agents.run import read_config, read_progress, run_world
 from tactile_braille.datasets.collector import GENERATOR_VERSION
+from tactile_braille.envs.registry import task_name, task_of
 
 ALGO_NAMES = {"dqn": "DQN", "sac_discrete": "SAC_DISC", "sac": "SAC", "td3": "TD3"}
 TASK_NAMES = {
@@ -98,7 +99,7 @@ class RunRecord:
         if self.config is None:
             return ""
         parts = [self.config.preset or "custom", self.config.precision]
-        if not self.config.her:
+        if not self.config.replay.her:
             parts.append("no HER")
         if self.config.backend != "dataset":
             parts.append(f"{self.config.backend} backend")
@@ -123,7 +124,7 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
     for run_dir in map(Path, run_dirs):
         if not (run_dir / "config.json").exists():
             raise FileNotFoundError(f"{run_dir} is not a training run (no config.json)")
-        config = TrainConfig.from_json(json.loads((run_dir / "config.json").read_text()))
+        config = read_config(run_dir)
         rows = read_progress(run_dir)
         typing_file = run_dir / "typing.json"
         typing = json.loads(typing_file.read_text()) if typing_file.exists() else None
@@ -134,9 +135,9 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
             typing = evaluate_typing(run_dir)
         world = run_world(run_dir)
         records.append(RunRecord(
-            path=run_dir, task=config.task.split("/")[-1], algo=config.algo, seed=config.seed,
+            path=run_dir, task=task_name(config.task), algo=config.algo, seed=config.seed,
             returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
-            world=(GENERATOR_VERSION if not config.task.startswith("tactile_braille/") else None)
+            world=(GENERATOR_VERSION if task_of(config.task) is None else None)
             if world is None else world.get("generator_version", world.get("rig")),
         ))  # fmt: skip
     return records
@@ -179,8 +180,9 @@ def _stat(values, digits: int = 1) -> str:
     return text + (f"; IQM {iqm(values):.{digits}f}" if len(values) >= 4 else "")
 
 
-_RUN_SETTINGS = {"seed", "epochs", "threads", "device", "dataset", "precision", "her", "backend",
-                 "checkpoint_every", "snapshots", "test_episodes"}  # fmt: skip
+_RUN_SETTINGS = {"task", "algo", "preset", "seed", "epochs", "threads", "device", "dataset", "precision",
+                 "replay.her", "backend", "checkpoint_every", "evaluation.snapshots",
+                 "evaluation.test_episodes"}  # fmt: skip
 """Settings that do not make a variant (or are named by it already)."""
 
 
@@ -190,15 +192,9 @@ def _departures(config: TrainConfig) -> list[str]:
 
     if config.preset not in PRESETS:
         return []
-    reference = preset_config(config.preset, config.task, config.algo)
-    changes = [
-        f"{name}={getattr(config, name)}"
-        for name in sorted(set(config.to_json()) - _RUN_SETTINGS - {"agent", "task", "algo", "preset"})
-        if getattr(config, name) != getattr(reference, name)
-    ]
-    agent, base = dataclasses.asdict(config.agent), dataclasses.asdict(reference.agent)
-    changes += [f"{name}={agent[name]}" for name in sorted(agent) if agent[name] != base[name]]
-    return changes
+    ran, preset = flatten(config), flatten(preset_config(config.preset, config.task, config.algo))
+    departed = [name for name in sorted(ran) if name not in _RUN_SETTINGS and ran[name] != preset[name]]
+    return [f"{name}={ran[name]}" for name in departed]
 
 
 def _label(algo: str, variant: str) -> str:
@@ -234,18 +230,13 @@ def results_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
 # ------------------------------------------------------------------ figures
 def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str | Path) -> Path:
     """Test return per epoch for each group: seeds, their mean and range, convergence, the original run."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from tactile_braille.gallery import save_figure
+    from tactile_braille._figures import new_figure, save_figure
 
     originals = original_curves()
     count = len(groups)
     columns = min(count, 2)
     rows = int(np.ceil(count / columns))
-    fig, axes = plt.subplots(rows, columns, figsize=(6.2 * columns, 3.6 * rows), squeeze=False)
+    fig, axes = new_figure(rows, columns, figsize=(6.2 * columns, 3.6 * rows))
     for ax, ((task, algo, variant), records) in zip(axes.ravel(), groups.items(), strict=False):
         length = min(len(r.returns) for r in records)
         curves = np.stack([r.returns[:length] for r in records])
@@ -282,15 +273,11 @@ def plot_trajectories(record: RunRecord, path: str | Path, goals: int = 3, seed:
 
     Needs the run's policy snapshots; returns None without them.
     """
-    import gymnasium as gym
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import torch
 
-    from tactile_braille.agents.train import make_agent
-    from tactile_braille.gallery import save_figure
+    from tactile_braille._figures import new_figure, save_figure
+    from tactile_braille.agents.rollout import run_episode
+    from tactile_braille.agents.training import make_agent, make_env
 
     snapshots = sorted((record.path / "snapshots").glob("epoch_*.pt"))
     if not snapshots or record.config is None:
@@ -299,30 +286,24 @@ def plot_trajectories(record: RunRecord, path: str | Path, goals: int = 3, seed:
         [snapshots[0], snapshots[len(snapshots) // 2], snapshots[-1]] if len(snapshots) >= 3 else snapshots
     )
     config = record.config
-    kwargs = {"backend": config.backend, "render_mode": "rgb_array"}
-    if config.dataset is not None:
-        kwargs["dataset"] = config.dataset
-    env = gym.make(config.task, **kwargs)
+    env = make_env(config, render_mode="rgb_array")  # with the run's episode limit
     agent = make_agent(config, env)
     rng = np.random.default_rng(seed)
     goal_keys = env.unwrapped.goal_keys
     episode_goals = [goal_keys[i] for i in rng.choice(len(goal_keys), size=goals, replace=False)]
-    fig, axes = plt.subplots(goals, len(chosen), figsize=(3.4 * len(chosen), 2.9 * goals), squeeze=False)
+    fig, axes = new_figure(goals, len(chosen), figsize=(3.4 * len(chosen), 2.9 * goals))
     for column, snapshot in enumerate(chosen):
         agent.load_policy_state_dict(torch.load(snapshot, weights_only=False, map_location=agent.device))
         epoch = int(snapshot.stem.split("_")[1]) + 1  # files count from 0, figures from 1
         for row, goal in enumerate(episode_goals):
-            observation, _ = env.reset(seed=seed + row, options={"goal_key": goal})
-            done, steps, info = False, 0, {}
-            while not done:
-                action = agent.policy_action(observation, 0, explore=False, rng=rng, deterministic=True)
-                observation, _, terminated, truncated, info = env.step(action)
-                done, steps = terminated or truncated, steps + 1
+            episode = run_episode(
+                agent, env, rng, seed=seed + row, options={"goal_key": goal}, deterministic=True
+            )
             ax = axes[row, column]
             ax.imshow(env.render())
             ax.axis("off")
-            pressed = info.get("pressed_key") or "nothing"
-            ax.set_title(f"epoch {epoch}: goal {goal}, pressed {pressed}, {steps} steps", fontsize=7)
+            pressed = episode.info.get("pressed_key") or "nothing"
+            ax.set_title(f"epoch {epoch}: goal {goal}, pressed {pressed}, {episode.steps} steps", fontsize=7)
     fig.suptitle(f"{record.task}, {ALGO_NAMES.get(record.algo, record.algo)}, seed {record.seed}", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)

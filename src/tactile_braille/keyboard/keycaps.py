@@ -337,17 +337,15 @@ def write_keycaps(
 
 def save_keycap_preview(caps: list[Keycap], path: str | Path) -> Path:
     """A PNG of the keycaps: a shaded top view of each, and the underside of the first."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
     from matplotlib.colors import LightSource
+
+    from tactile_braille._figures import new_figure, save_figure
 
     shade = LightSource(azdeg=315, altdeg=35)
     panels = len(caps) + 1
     columns = min(panels, 8)
     rows = int(np.ceil(panels / columns))
-    fig, axes = plt.subplots(rows, columns, figsize=(2.0 * columns, 2.1 * rows), squeeze=False)
+    fig, axes = new_figure(rows, columns, figsize=(2.0 * columns, 2.1 * rows))
     for ax in axes.ravel():
         ax.axis("off")
     for ax, cap in zip(axes.ravel(), caps, strict=False):
@@ -362,6 +360,4 @@ def save_keycap_preview(caps: list[Keycap], path: str | Path) -> Path:
     fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04).set_label("height (mm)", fontsize=8)
     fig.suptitle("Braille keycaps (STL, mm): shaded tops; underside with the MX socket", fontsize=10)
     fig.tight_layout()
-    from tactile_braille.gallery import save_figure
-
     return save_figure(fig, path)

@@ -1,10 +1,12 @@
 """Supervised key classification from single tactile images (the paper's initial assessment).
 
 The paper's network (the Atari CNN: conv 32/64/64, kernels 8/4/3, strides
-4/2/1, dense 512), with batch norm after the conv activations and dropout on
-the dense layer, trained with a decaying learning rate and early stopping on
-the validation loss; random shift and zoom augmentation is available
-(``max_shift``, ``max_zoom``) but off by default (see ``ClassifierConfig``).
+4/2/1, :func:`~tactile_braille.supervised.networks.conv_stack`, then dense
+512), with batch norm after the conv activations and dropout on the dense
+layer, trained (:func:`~tactile_braille.supervised.fit.fit_minibatches`) with
+a decaying learning rate and early stopping on the validation loss; random
+shift and zoom augmentation is available (``max_shift``, ``max_zoom``) but off
+by default (see ``ClassifierConfig``).
 """
 
 from __future__ import annotations
@@ -23,8 +25,9 @@ from torch.nn import functional as F
 from tactile_braille._io import atomic_path
 from tactile_braille.datasets.store import TactileDataset
 from tactile_braille.keyboard.layout import ALL_TASK_KEYS
+from tactile_braille.supervised.fit import fit_minibatches
+from tactile_braille.supervised.networks import IMAGE_SIZE_PX, conv_output_size, conv_stack, he_init
 
-IMAGE_SIZE_PX = 100
 MODEL_FILE = "model.pt"
 CONFIG_FILE = "classifier.json"
 
@@ -76,25 +79,11 @@ class KeyClassifier(nn.Module):
 
     def __init__(self, num_classes: int, dropout: float = 0.5) -> None:
         super().__init__()
-        self.features = nn.Sequential(
-            nn.Conv2d(1, 32, 8, stride=4),
-            nn.ReLU(),
-            nn.BatchNorm2d(32),
-            nn.Conv2d(32, 64, 4, stride=2),
-            nn.ReLU(),
-            nn.BatchNorm2d(64),
-            nn.Conv2d(64, 64, 3, stride=1),
-            nn.ReLU(),
-            nn.BatchNorm2d(64),
-            nn.Flatten(),
-        )
+        self.features = conv_stack(batch_norm=True)
         self.head = nn.Sequential(
-            nn.Linear(64 * 9 * 9, 512), nn.ReLU(), nn.Dropout(dropout), nn.Linear(512, num_classes)
+            nn.Linear(conv_output_size(), 512), nn.ReLU(), nn.Dropout(dropout), nn.Linear(512, num_classes)
         )
-        for module in self.modules():
-            if isinstance(module, nn.Conv2d | nn.Linear):
-                nn.init.kaiming_normal_(module.weight, nonlinearity="relu")  # variance scaling
-                nn.init.zeros_(module.bias)
+        self.apply(he_init)  # variance scaling, layer after layer
         # Small output weights: start from near-uniform class probabilities.
         nn.init.normal_(self.head[-1].weight, std=0.01)
 
@@ -182,36 +171,35 @@ def train_classifier(
     schedule = torch.optim.lr_scheduler.ExponentialLR(optimiser, gamma=config.lr_decay)
     history: list[dict[str, float]] = []
     best_loss, best_state, best_epoch, stale = float("inf"), None, 0, 0
-    for epoch in range(config.max_epochs):
-        model.train()
-        order = torch.randperm(len(train_images), generator=generator)
-        total = 0.0
-        for start in range(0, len(order), config.batch_size):
-            batch = order[start : start + config.batch_size]
-            images = train_images[batch]
-            if config.max_shift or config.max_zoom:
-                images = _augment(images, config, generator)
-            logits = model(images)
-            loss = F.cross_entropy(logits, train_labels[batch])
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
-            total += loss.item() * len(batch)
+
+    def batch_loss(batch: torch.Tensor) -> torch.Tensor:
+        images = train_images[batch]
+        if config.max_shift or config.max_zoom:
+            images = _augment(images, config, generator)
+        return F.cross_entropy(model(images), train_labels[batch])
+
+    def end_epoch(epoch: int, train_loss: float) -> bool:
+        """Validate, decay the learning rate, keep the best weights; True to stop early."""
+        nonlocal best_loss, best_state, best_epoch, stale
         val_loss, val_accuracy = _evaluate(model, val_images, val_labels)
         history.append({
-            "epoch": epoch, "train_loss": total / len(order), "val_loss": val_loss,
+            "epoch": epoch, "train_loss": train_loss, "val_loss": val_loss,
             "val_accuracy": val_accuracy, "learning_rate": schedule.get_last_lr()[0],
         })  # fmt: skip
         if progress:
-            print(f"epoch {epoch:3d}  train loss {total / len(order):.4f}  "
+            print(f"epoch {epoch:3d}  train loss {train_loss:.4f}  "
                   f"val loss {val_loss:.4f}  val accuracy {val_accuracy:.2%}")  # fmt: skip
         schedule.step()
         if val_loss < best_loss - 1e-4:
             best_loss, best_state, best_epoch, stale = val_loss, copy.deepcopy(model.state_dict()), epoch, 0
-        else:
-            stale += 1
-            if stale >= config.patience:
-                break
+            return False
+        stale += 1
+        return stale >= config.patience
+
+    fit_minibatches(
+        model, len(train_images), batch_loss, optimiser, config.max_epochs, config.batch_size, generator,
+        end_epoch=end_epoch,
+    )  # fmt: skip
     if best_state is not None:
         model.load_state_dict(best_state)
     model.eval()

@@ -26,11 +26,10 @@ def save_confusion_matrix(
     matrix: np.ndarray, classes: tuple[str, ...], output: str | Path, title: str
 ) -> Path:
     """Write the confusion matrix (rows: true key, columns: predicted) as a PNG."""
-    import matplotlib.pyplot as plt
+    from tactile_braille._figures import new_figure, save_figure
 
-    from tactile_braille.gallery import save_figure
-
-    fig, ax = plt.subplots(figsize=(8.5, 7.5))
+    fig, axes = new_figure(figsize=(8.5, 7.5))
+    ax = axes[0, 0]
     shown = np.where(matrix > 0, matrix, np.nan)
     image = ax.imshow(shown, cmap="viridis", interpolation="nearest")
     ax.set_xticks(range(len(classes)), classes, rotation=90, fontsize=7)

@@ -1,0 +1,576 @@
+"""A training run's settings as data: nested frozen dataclasses, validated field by field, torch-free.
+
+``TrainConfig`` holds the loop's schedule and the run's environment and
+machine settings, and one group per concern: ``agent`` (the algorithm's
+hyperparameters, a :class:`DQNConfig`, :class:`DiscreteSACConfig`,
+:class:`SACConfig` or :class:`TD3Config`), ``replay`` (:class:`ReplayConfig`),
+``touch`` (:class:`TouchConfig`, the touch encoder of the ``fast`` preset) and
+``evaluation`` (:class:`EvaluationConfig`). Each field's default is the
+paper's (Table II, the released code where the table is silent), written
+once, here; presets (:mod:`~tactile_braille.agents.presets`) are
+``dataclasses.replace`` of these defaults.
+
+Every field is checked against its annotation when a config is made (a
+``Literal`` lists the accepted values, ``int | None`` accepts None), then
+against its range; a bad value raises a ``ValueError`` that names the field.
+The command line is generated from the same annotations
+(:func:`tactile_braille.cli` ``train --help``), and this module imports no
+torch, so that parsing and validating a command is quick.
+
+>>> config = TrainConfig(algo="sac", task="tactile_braille/ContinuousArrows-v0")
+>>> config.agent.gamma, config.replay.relabel, config.updates_per_step
+(0.95, 'paper', 2)
+>>> replace_settings(config, {"agent": {"hidden": (256, 256)}, "epochs": 3}).agent.hidden
+(256, 256)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Literal, Union
+
+Algorithm = Literal["dqn", "sac_discrete", "sac", "td3"]
+Backend = Literal["dataset", "render", "rig"]
+Precision = Literal["fp32", "bf16"]
+RelabelRule = Literal["paper", "all"]
+TouchInputs = Literal["features", "readout"]
+
+PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
+RELABELLING: tuple[str, ...] = typing.get_args(RelabelRule)
+TOUCH_INPUTS: tuple[str, ...] = typing.get_args(TouchInputs)
+BACKENDS: tuple[str, ...] = typing.get_args(Backend)
+
+
+def _check_hyperparameters(config) -> None:
+    """Refuse hyperparameters of a wrong type, or that no algorithm can use."""
+    check_types(config)
+    problems = []
+    if getattr(config, "batch_size", 1) < 1:
+        problems.append(f"batch_size must be at least 1, got {config.batch_size}")
+    if not 0.0 <= getattr(config, "gamma", 0.0) <= 1.0:
+        problems.append(f"gamma must be in [0, 1], got {config.gamma}")
+    if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
+        problems.append(f"tau must be in (0, 1], got {config.tau}")
+    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha"):
+        if getattr(config, name, 1.0) <= 0:
+            problems.append(f"{name} must be positive, got {getattr(config, name)}")
+    hidden = getattr(config, "hidden", (1,))
+    if not hidden or min(hidden) < 1:
+        problems.append(f"hidden needs at least one positive layer size, got {hidden}")
+    for name in ("epsilon_decay_steps", "noise_decay_steps", "policy_delay"):
+        if getattr(config, name, 1) < 1:
+            problems.append(f"{name} must be at least 1, got {getattr(config, name)}")
+    for name in ("epsilon_start", "epsilon_end", "test_epsilon", "target_entropy_ratio"):
+        if not 0.0 <= getattr(config, name, 0.0) <= 1.0:
+            problems.append(f"{name} must be in [0, 1], got {getattr(config, name)}")
+    for name in ("noise_start", "noise_end", "test_noise", "target_noise", "noise_clip"):
+        if getattr(config, name, 0.0) < 0:
+            problems.append(f"{name} must not be negative, got {getattr(config, name)}")
+    if problems:
+        raise ValueError(f"{type(config).__name__}: " + "; ".join(problems))
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """Hyperparameters (defaults: the paper's Table II).
+
+    Attributes:
+        gamma: discount.
+        learning_rate: Adam's step size.
+        tau: Polyak factor of the soft target update (per update).
+        epsilon_start, epsilon_end: exploration at the start and end of the schedule.
+        epsilon_decay_steps: environment steps over which epsilon decays linearly.
+        test_epsilon: exploration during test episodes (the paper: 0, deterministic;
+            the released code: 0.05).
+        batch_size: transitions per update.
+        hidden: units of the dense layers after the encoder.
+        layer_norm: LayerNorm in the Q-network's dense layers (as DroQ's critics).
+    """
+
+    gamma: float = 0.95
+    learning_rate: float = 5e-4
+    tau: float = 0.005
+    epsilon_start: float = 1.0
+    epsilon_end: float = 0.1
+    epsilon_decay_steps: int = 2000
+    test_epsilon: float = 0.0
+    batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
+
+    def __post_init__(self) -> None:
+        _check_hyperparameters(self)
+
+
+@dataclass(frozen=True)
+class SACConfig:
+    """Hyperparameters (defaults: the paper's Table II).
+
+    Attributes:
+        gamma: discount.
+        learning_rate: actor and critic step size.
+        alpha_learning_rate: temperature step size.
+        initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
+            every step alive, and pressing ends an episode: a high temperature delays the first
+            presses until it has fallen (docs/agents.md).
+        target_entropy: entropy the temperature steers the policy towards
+            (the paper's -6 for a 3-D action; the usual choice is -3).
+        tau: Polyak factor of the target critics (the paper's polyak 0.995).
+        batch_size: transitions per update.
+        hidden: units of the dense layers (the paper's 512; the released code's 1024, 512).
+        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
+        shared_encoder: the actor reuses the first critic's encoder, detached
+            (not the paper's setting; as in SAC-AE and DrQ).
+        critic_pose: asymmetric critics that also see the sensor pose (batches then carry
+            ``poses`` and ``next_poses``); the actor still acts on touch alone.
+    """
+
+    gamma: float = 0.95
+    learning_rate: float = 5e-4
+    alpha_learning_rate: float = 1e-3
+    initial_alpha: float = 1.0
+    target_entropy: float = -6.0
+    tau: float = 0.005
+    batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
+    shared_encoder: bool = False
+    critic_pose: bool = False
+
+    def __post_init__(self) -> None:
+        _check_hyperparameters(self)
+
+
+@dataclass(frozen=True)
+class DiscreteSACConfig:
+    """Hyperparameters (defaults: the paper's Table II).
+
+    Attributes:
+        gamma: discount (the paper's 0.6 for discrete SAC).
+        learning_rate: actor and critic step size.
+        alpha_learning_rate: temperature step size.
+        initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
+            every step alive, and pressing ends an episode: a high temperature delays the first
+            presses until it has fallen (docs/agents.md).
+        target_entropy_ratio: target entropy as a share of the maximum,
+            ``ln(num_actions)`` (the released code's 0.1; the paper quotes
+            the resulting 0.139, i.e. 0.1 ln 4).
+        tau: Polyak factor of the target critics (per update).
+        batch_size: transitions per update.
+        hidden: units of the dense layers after the encoder.
+        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
+        shared_encoder: the actor reuses the first critic's encoder, detached
+            (not the paper's setting; as in SAC-AE and DrQ).
+    """
+
+    gamma: float = 0.6
+    learning_rate: float = 5e-4
+    alpha_learning_rate: float = 1e-3
+    initial_alpha: float = 1.0
+    target_entropy_ratio: float = 0.1
+    tau: float = 0.005
+    batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
+    shared_encoder: bool = False
+
+    def __post_init__(self) -> None:
+        _check_hyperparameters(self)
+
+
+@dataclass(frozen=True)
+class TD3Config:
+    """Hyperparameters (defaults: the paper's Table II).
+
+    Attributes:
+        gamma: discount.
+        learning_rate: actor and critic step size (the paper's 5e-5; the released code's 7.5e-5).
+        tau: Polyak factor of the targets (the paper's polyak 0.995).
+        noise_start, noise_end: standard deviation of the exploration noise
+            at the start and the end of its linear schedule.
+        noise_decay_steps: environment steps over which the noise decays.
+        test_noise: noise during test episodes (0: deterministic).
+        target_noise: standard deviation of the target-policy smoothing noise.
+        noise_clip: bound of the smoothing noise.
+        policy_delay: critic updates per actor (and target) update.
+        batch_size: transitions per update.
+        hidden: units of the dense layers.
+        layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
+        shared_encoder: the actor reuses the first critic's encoder, detached (not the paper's).
+        critic_pose: asymmetric critics that also see the sensor pose (as SAC's).
+    """
+
+    gamma: float = 0.95
+    learning_rate: float = 5e-5
+    tau: float = 0.005
+    noise_start: float = 1.0
+    noise_end: float = 0.05
+    noise_decay_steps: int = 2000
+    test_noise: float = 0.0
+    target_noise: float = 0.05
+    noise_clip: float = 0.2
+    policy_delay: int = 2
+    batch_size: int = 32
+    hidden: tuple[int, ...] = (512,)
+    layer_norm: bool = False
+    shared_encoder: bool = False
+    critic_pose: bool = False
+
+    def __post_init__(self) -> None:
+        _check_hyperparameters(self)
+
+
+AgentConfig = Union[DQNConfig, DiscreteSACConfig, SACConfig, TD3Config]  # noqa: UP007 - a runtime alias
+AGENT_CONFIGS: dict[str, type] = {
+    "dqn": DQNConfig,
+    "sac_discrete": DiscreteSACConfig,
+    "sac": SACConfig,
+    "td3": TD3Config,
+}
+"""Each algorithm's hyperparameter dataclass."""
+ALGORITHMS: tuple[str, ...] = typing.get_args(Algorithm)
+CONTINUOUS_ALGORITHMS = frozenset({"sac", "td3"})
+"""Algorithms that act in continuous action spaces (the others choose among discrete actions)."""
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """The replay buffer.
+
+    Attributes:
+        capacity: transitions kept (the paper's 100,000).
+        her: hindsight relabelling.
+        relabel: ``"paper"`` (copies of wrong-press episodes, the paper's) or ``"all"`` (every
+            transition for every goal, relabelled when sampled; :mod:`~tactile_braille.agents.replay`).
+    """
+
+    capacity: int = 100_000
+    her: bool = True
+    relabel: RelabelRule = "paper"
+
+    def __post_init__(self) -> None:
+        check_types(self)
+        _at_least(self, 1, "capacity")
+
+
+@dataclass(frozen=True)
+class TouchConfig:
+    """The touch encoder (not the paper's; :mod:`~tactile_braille.supervised.touch`).
+
+    Attributes:
+        enabled: label every frame with the sensor pose and keys (what the robot knows), fit a touch
+            encoder on the labelled frames after ``start_steps`` and learn on its features.
+        epochs: passes of the encoder's first fit over those taps.
+        inputs: what the agent learns on: the encoder's ``"features"`` or its ``"readout"`` (pose and
+            key probabilities, whose meaning survives a refit).
+        goal_positions: the agent also sees where its goal key lies on the calibrated layout, in the
+            coordinates of the pose the encoder learns.
+        refits: refits on all labelled frames so far, every ``refit_every`` steps after the first fit
+            (each as many gradient steps as the first fit).
+        refit_every: environment steps between refits (None: ``start_steps``).
+    """
+
+    enabled: bool = False
+    epochs: int = 40
+    inputs: TouchInputs = "features"
+    goal_positions: bool = False
+    refits: int = 0
+    refit_every: int | None = None
+
+    def __post_init__(self) -> None:
+        check_types(self)
+        _at_least(self, 1, "epochs", "refit_every")
+        _at_least(self, 0, "refits")
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """What a run measures as it trains.
+
+    Attributes:
+        test_episodes: deterministic test episodes after each epoch.
+        snapshots: policy snapshots kept (``snapshots/epoch_NNNN.pt``), spread evenly from the first
+            epoch to the last (for the trajectory figure).
+    """
+
+    test_episodes: int = 20
+    snapshots: int = 3
+
+    def __post_init__(self) -> None:
+        check_types(self)
+        _at_least(self, 1, "test_episodes")
+        _at_least(self, 0, "snapshots")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """A training run. Defaults are the paper's; :mod:`~tactile_braille.agents.presets` sets the rest.
+
+    Attributes:
+        task: environment id (``tactile_braille/DiscreteArrows-v0``...).
+        algo: ``"dqn"``, ``"sac_discrete"``, ``"sac"`` or ``"td3"``.
+        seed: seeds networks, exploration and environments.
+        epochs: epochs to run.
+        steps_per_epoch: environment steps per epoch (250).
+        start_steps: uniformly random actions before the policy acts, and before updates start (200).
+        updates_per_step: gradient updates per environment step (None: 2, TD3 1).
+        update_every: updates happen in bursts every this many steps
+            (``update_every * updates_per_step`` at a time; the released TD3 used 100).
+        max_episode_steps: episode cut (None: the registry's 25).
+        backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
+        dataset: dataset path for the dataset backend (default: the cached one).
+        device: torch device (``cpu``, ``cuda``, ``cuda:1``...).
+        precision: ``fp32`` or ``bf16`` (autocast in the updates).
+        threads: torch CPU threads.
+        checkpoint_every: epochs between checkpoints.
+        preset: name of the preset the settings came from (a record only).
+        agent: the algorithm's hyperparameters (default: the paper's for ``algo``).
+        replay: the replay buffer.
+        touch: the touch encoder.
+        evaluation: test episodes and policy snapshots.
+    """
+
+    task: str = "tactile_braille/DiscreteArrows-v0"
+    algo: Algorithm = "dqn"
+    seed: int = 0
+    epochs: int = 25
+    steps_per_epoch: int = 250
+    start_steps: int = 200
+    updates_per_step: int | None = None
+    update_every: int = 1
+    max_episode_steps: int | None = None
+    backend: Backend = "dataset"
+    dataset: str | None = None
+    device: str = "cpu"
+    precision: Precision = "fp32"
+    threads: int = 2
+    checkpoint_every: int = 1
+    preset: str | None = None
+    agent: AgentConfig | None = None
+    replay: ReplayConfig = field(default_factory=ReplayConfig)
+    touch: TouchConfig = field(default_factory=TouchConfig)
+    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGORITHMS:
+            raise ValueError(f"unknown algorithm {self.algo!r}; choose one of {ALGORITHMS}")
+        agent_config = AGENT_CONFIGS[self.algo]
+        for name, group in {"agent": agent_config, **GROUPS}.items():  # a group may be given as a dict
+            if isinstance(getattr(self, name), dict):
+                object.__setattr__(self, name, _from_dict(group, getattr(self, name), name))
+        if self.agent is None:
+            object.__setattr__(self, "agent", agent_config())
+        elif not isinstance(self.agent, agent_config):
+            raise ValueError(f"{self.algo} takes a {agent_config.__name__}, got {type(self.agent).__name__}")
+        if self.updates_per_step is None:
+            object.__setattr__(self, "updates_per_step", 1 if self.algo == "td3" else 2)
+        check_types(self)
+        _at_least(self, 1, "epochs", "steps_per_epoch", "update_every", "checkpoint_every", "threads",
+                  "max_episode_steps")  # fmt: skip
+        _at_least(self, 0, "seed", "start_steps", "updates_per_step")
+        self._check_task()
+        self._check_device()
+        self._check_touch()
+
+    def _check_task(self) -> None:
+        from tactile_braille.envs.registry import task_of  # the environments' registry, not torch
+
+        task = task_of(self.task)  # raises for an unknown id
+        if task is not None and task.continuous != (self.algo in CONTINUOUS_ALGORITHMS):
+            kind = "continuous" if self.algo in CONTINUOUS_ALGORITHMS else "discrete"
+            raise ValueError(f"{self.algo} needs a {kind} task, got {self.task}")
+        if self.touch.goal_positions and task is None:
+            raise ValueError(
+                f"touch.goal_positions needs a braille task (a keyboard layout), got {self.task}"
+            )
+
+    def _check_device(self) -> None:
+        kind, _, index = self.device.partition(":")
+        if kind not in ("cpu", "cuda", "mps") or (index and not index.isdigit()):
+            raise ValueError(f"device must be cpu, cuda, cuda:N or mps, got {self.device!r}")
+
+    def _check_touch(self) -> None:
+        touch = self.touch
+        needs_encoder = {
+            "agent.critic_pose": getattr(self.agent, "critic_pose", False),
+            "touch.inputs='readout'": touch.inputs != "features",
+            "touch.goal_positions": touch.goal_positions,
+        }
+        for name, wanted in needs_encoder.items():
+            if wanted and not touch.enabled:
+                raise ValueError(
+                    f"{name} learns from a touch encoder's labelled frames: set touch.enabled too"
+                )
+        if touch.enabled and self.start_steps < 10:
+            raise ValueError(
+                f"a touch encoder learns from the start steps: need at least 10, got {self.start_steps}"
+            )
+
+    def with_changes(self, **changes: Any) -> TrainConfig:
+        """A copy with settings changed (groups as dicts of their settings): :func:`replace_settings`."""
+        return replace_settings(self, changes)
+
+    @property
+    def continuous(self) -> bool:
+        """Whether the algorithm acts in a continuous action space."""
+        return self.algo in CONTINUOUS_ALGORITHMS
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict) -> TrainConfig:
+        """A config from :meth:`to_json`'s dict, or from the flat config.json of runs written before
+        the settings were grouped (their settings move to their groups)."""
+        data = _ungroup_legacy(dict(data))
+        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise ValueError(f"unknown settings {sorted(unknown)}")
+        if "algo" not in data or data["algo"] not in AGENT_CONFIGS:
+            raise ValueError(f"unknown algorithm {data.get('algo')!r}; choose one of {ALGORITHMS}")
+        groups = {"agent": AGENT_CONFIGS[data["algo"]], **GROUPS}
+        for name, group in groups.items():
+            if name in data:
+                data[name] = _from_dict(group, data[name], name)
+        return cls(**data)
+
+
+GROUPS: dict[str, type] = {"replay": ReplayConfig, "touch": TouchConfig, "evaluation": EvaluationConfig}
+"""The setting groups of :class:`TrainConfig` besides ``agent`` (whose class depends on ``algo``)."""
+
+_LEGACY_NAMES = {
+    "replay_capacity": ("replay", "capacity"),
+    "her": ("replay", "her"),
+    "relabel": ("replay", "relabel"),
+    "touch_encoder": ("touch", "enabled"),
+    "touch_epochs": ("touch", "epochs"),
+    "touch_inputs": ("touch", "inputs"),
+    "goal_positions": ("touch", "goal_positions"),
+    "touch_refits": ("touch", "refits"),
+    "touch_refit_every": ("touch", "refit_every"),
+    "test_episodes": ("evaluation", "test_episodes"),
+    "snapshots": ("evaluation", "snapshots"),
+}
+"""Flat settings of config.json files written before the groups, and where they live now."""
+
+
+def _ungroup_legacy(data: dict) -> dict:
+    for old, (group, name) in _LEGACY_NAMES.items():
+        if old in data:
+            data.setdefault(group, {})
+            data[group] = {**data[group], name: data.pop(old)}
+    return data
+
+
+def _from_dict(cls: type, values: Any, where: str):
+    """A group's dataclass from its JSON dict (lists become tuples), naming unknown settings."""
+    if isinstance(values, cls):
+        return values
+    if not isinstance(values, dict):
+        raise ValueError(f"{where} must be a mapping of settings, got {values!r}")
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(values) - known
+    if unknown:
+        raise ValueError(f"{cls.__name__} has no settings {sorted(unknown)} ({where}.*)")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def replace_settings(config: TrainConfig, changes: dict[str, Any]) -> TrainConfig:
+    """``config`` with ``changes``: TrainConfig fields, and a group as a dict of its fields to change
+    (``{"agent": {"hidden": (256,)}, "touch": {"enabled": True}, "epochs": 3}``). Changing ``algo``
+    starts the agent from that algorithm's defaults."""
+    changes = dict(changes)
+    fields = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = set(changes) - fields
+    if unknown:
+        raise ValueError(f"TrainConfig has no settings {sorted(unknown)}")
+    algo = changes.get("algo", config.algo)
+    groups = {"agent": AGENT_CONFIGS.get(algo, type(config.agent)), **GROUPS}
+    for name, group in groups.items():
+        if isinstance(changes.get(name), dict):
+            base = getattr(config, name) if (name != "agent" or algo == config.algo) else group()
+            known = {f.name for f in dataclasses.fields(group)}
+            unknown = set(changes[name]) - known
+            if unknown:
+                raise ValueError(f"{group.__name__} has no settings {sorted(unknown)} ({name}.*)")
+            changes[name] = dataclasses.replace(base, **changes[name])
+    if algo != config.algo and "agent" not in changes:
+        changes["agent"] = None
+    return dataclasses.replace(config, **changes)
+
+
+def flatten(config) -> dict[str, Any]:
+    """Every setting of a config as ``{"dotted.name": value}`` (tuples as lists, as JSON stores them)."""
+    flat: dict[str, Any] = {}
+    for name, value in dataclasses.asdict(config).items():
+        if isinstance(value, dict):
+            flat.update({f"{name}.{k}": list(v) if isinstance(v, tuple) else v for k, v in value.items()})
+        else:
+            flat[name] = list(value) if isinstance(value, tuple) else value
+    return flat
+
+
+def differences(before, after, ignore: tuple[str, ...] = ()) -> list[str]:
+    """``name: before -> after`` for each dotted setting in which two configs differ."""
+    old, new = flatten(before), flatten(after)
+    return [
+        f"{name}: {old.get(name)!r} -> {new.get(name)!r}"
+        for name in sorted(set(old) | set(new))
+        if name not in ignore and old.get(name) != new.get(name)
+    ]
+
+
+# ------------------------------------------------------------------ field checks
+def _at_least(config, minimum: int, *names: str) -> None:
+    for name in names:
+        value = getattr(config, name)
+        if value is not None and value < minimum:
+            raise ValueError(f"{type(config).__name__}.{name} must be at least {minimum}, got {value}")
+
+
+def check_types(config) -> None:
+    """Refuse a field whose value does not fit its annotation (naming the field and what it takes)."""
+    hints = typing.get_type_hints(type(config))
+    for spec in dataclasses.fields(config):
+        value, hint = getattr(config, spec.name), hints[spec.name]
+        if not _fits(value, hint):
+            raise ValueError(f"{type(config).__name__}.{spec.name} must be {describe(hint)}, got {value!r}")
+
+
+def _fits(value: Any, hint: Any) -> bool:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is Literal:
+        return isinstance(value, str) and value in args
+    if origin in (Union, types.UnionType):
+        return any(_fits(value, arg) for arg in args)
+    if origin is tuple:
+        return isinstance(value, tuple) and all(_fits(v, args[0]) for v in value)
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    return isinstance(value, hint)
+
+
+def describe(hint: Any) -> str:
+    """What a field of this annotation takes, in words."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is Literal:
+        return "one of " + ", ".join(repr(a) for a in args)
+    if origin in (Union, types.UnionType):
+        return " or ".join(describe(a) for a in args)
+    if origin is tuple:
+        return f"a tuple of {describe(args[0])}s"
+    if hint is type(None):
+        return "None"
+    return {bool: "true or false", int: "an integer", float: "a finite number", str: "a string"}.get(
+        hint, getattr(hint, "__name__", str(hint))
+    )

@@ -1,0 +1,256 @@
+"""A run folder: what a training run writes, and what a resume reads back.
+
+``runs/{task}__{algo}__{seed}__{time}/`` holds ``config.json`` (the resolved
+settings), ``world.json`` (the dataset or rig it learns from, with the
+generator version and the keyboard's and sensor's parameters: a resume in
+another world is refused), ``progress.csv`` (one row per epoch), TensorBoard
+events (``charts/...``, ``losses/...``, when TensorBoard is installed),
+``snapshots/epoch_NNNN.pt`` (policy snapshots) and, every
+``checkpoint_every`` epochs, an atomic checkpoint (``checkpoint.pt``:
+networks, optimisers, counters and generator states; ``replay.{epoch}.npz``:
+the replay buffer it names). Every file is written atomically, so a crash or
+``kill -9`` costs at most the work since the last checkpoint.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tactile_braille._io import atomic_path
+from tactile_braille.agents.config import TrainConfig, differences
+from tactile_braille.envs.registry import task_name
+
+CONFIG_FILE = "config.json"
+WORLD_FILE = "world.json"
+"""Where a run records the world it learns in (:attr:`BrailleEnv.world`)."""
+CHECKPOINT_FILE = "checkpoint.pt"
+PROGRESS_FILE = "progress.csv"
+PROGRESS_FIELDS = (
+    "epoch", "env_steps", "updates", "train/episodes", "train/episodic_return", "test/episodic_return",
+    "test/episode_length", "test/success_rate", "losses/q_loss", "losses/q_values", "losses/qf_loss",
+    "losses/actor_loss", "losses/alpha", "losses/entropy", "charts/SPS", "time_s",
+)  # fmt: skip
+
+
+@dataclass
+class Counters:
+    """Where a run stands: the next epoch to run, environment steps and gradient updates so far."""
+
+    epoch: int = 0
+    env_steps: int = 0
+    updates: int = 0
+
+
+def open_run(
+    config: TrainConfig | None, run_dir: str | Path | None, resume: bool
+) -> tuple[TrainConfig, Path]:
+    """The run's settings and folder: read back for a resume, else written to a new folder."""
+    if resume:
+        if run_dir is None:
+            raise ValueError("resume needs the run folder")
+        return read_config(run_dir), Path(run_dir)
+    config = config or TrainConfig()
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    run_dir = Path(run_dir or f"runs/{task_name(config.task)}__{config.algo}__{config.seed}__{stamp}")
+    if (run_dir / CONFIG_FILE).exists():
+        raise FileExistsError(f"{run_dir} holds a run already; resume it or choose another folder")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_path(run_dir / CONFIG_FILE) as temporary:
+        temporary.write_text(json.dumps(config.to_json(), indent=2))
+    return config, run_dir
+
+
+def read_config(run_dir: str | Path) -> TrainConfig:
+    """A run's settings (config.json files of every version of the format are read)."""
+    try:
+        return TrainConfig.from_json(json.loads((Path(run_dir) / CONFIG_FILE).read_text()))
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"{run_dir} is not a resumable run: {error}") from None
+
+
+def setting_differences(run_dir: str | Path, config: TrainConfig) -> list[str]:
+    """The settings, epochs aside, in which the run in ``run_dir`` differs from ``config``
+    (``name: stored -> wanted``, dotted names for grouped settings).
+
+    The stored config.json is read through :class:`TrainConfig`, so a run written before a setting
+    existed compares with that setting's default (the behaviour it was trained with).
+    """
+    return differences(read_config(run_dir), config, ignore=("epochs",))
+
+
+# ------------------------------------------------------------------ the world
+def record_world(run_dir: Path, env, resume: bool) -> None:
+    """Write the run's world, or check that a resumed run continues in the world it started in.
+
+    A run from before worlds were recorded is resumed without a record: what
+    it started in is unknown, and recording the present world would claim it.
+    """
+    from tactile_braille.envs.braille_env import BrailleEnv
+
+    if not isinstance(env.unwrapped, BrailleEnv):  # goal-conditioned toys have no tactile world
+        return
+    world = json.loads(json.dumps(env.unwrapped.world))  # as stored: tuples become lists
+    path = run_dir / WORLD_FILE
+    if path.exists():
+        stored = json.loads(path.read_text())
+        stored.pop("dataset", None)  # where the dataset lies may change; what it holds may not
+        differ = _json_differences(stored, {k: v for k, v in world.items() if k != "dataset"})
+        if differ:
+            shown = "; ".join(differ[:3]) + (f"; and {len(differ) - 3} more" if len(differ) > 3 else "")
+            raise ValueError(
+                f"{run_dir} was trained in another world than this one ({shown}); "
+                "start a new run instead of resuming it"
+            )
+        return
+    if resume and (run_dir / CHECKPOINT_FILE).exists():
+        return
+    with atomic_path(path) as temporary:
+        temporary.write_text(json.dumps(world, indent=2, sort_keys=True))
+
+
+def _json_differences(stored, now, path: str = "") -> list[str]:
+    """``path: stored -> now`` for each leaf in which two JSON values differ."""
+    if isinstance(stored, dict) and isinstance(now, dict):
+        return [
+            line
+            for key in sorted(set(stored) | set(now))
+            for line in _json_differences(stored.get(key), now.get(key), f"{path}.{key}" if path else key)
+        ]
+    return [] if stored == now else [f"{path or 'world'}: {json.dumps(stored)} -> {json.dumps(now)}"]
+
+
+def run_world(run_dir: str | Path) -> dict | None:
+    """The world a run recorded, or ``None`` for a run from before worlds were recorded."""
+    path = Path(run_dir) / WORLD_FILE
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+# ------------------------------------------------------------------ checkpoints
+def save_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator, counters: Counters) -> None:
+    """Write the replay buffer, then the checkpoint that names it, then drop older buffers.
+
+    ``counters.epoch`` is the epoch just finished. Each step is atomic, so a
+    crash anywhere leaves the previous checkpoint and the buffer it names
+    intact. The episode in progress is not saved: it restarts on resume.
+    """
+    replay = f"replay.{counters.epoch}.npz"
+    buffer.save(run_dir / replay)
+    state = {
+        "agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+        "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
+        "epoch": counters.epoch, "env_steps": counters.env_steps, "updates": counters.updates,
+        "replay": replay,
+    }  # fmt: skip
+    with atomic_path(run_dir / CHECKPOINT_FILE, fsync=True) as temporary:
+        torch.save(state, temporary)
+    for old in run_dir.glob("replay.*.npz"):
+        if old.name != replay:
+            old.unlink()
+
+
+def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -> Counters:
+    """Load the last checkpoint into the agent, the replay buffer and the generators; the counters to
+    continue from (a fresh start's if the run has no checkpoint yet)."""
+    path = run_dir / CHECKPOINT_FILE
+    if not path.exists():
+        return Counters()
+    state = torch.load(path, weights_only=False, map_location=agent.device)
+    agent.load_state_dict(state["agent"])
+    rng.bit_generator.state = state["rng"]
+    torch.set_rng_state(state["torch_rng"].cpu())
+    if state.get("cuda_rng") is not None and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
+    buffer.load(run_dir / state["replay"])
+    return Counters(state["epoch"] + 1, state["env_steps"], state["updates"])
+
+
+def snapshot_epochs(epochs: int, snapshots: int) -> set[int]:
+    """Epochs after which a policy snapshot is kept: ``snapshots`` of them, first to last."""
+    if snapshots <= 0:
+        return set()
+    return {round(float(e)) for e in np.linspace(0, epochs - 1, min(snapshots, epochs))}
+
+
+def save_snapshot(run_dir: Path, agent, epoch: int) -> None:
+    """The policy after ``epoch`` (what acting needs, for the trajectory figure)."""
+    (run_dir / "snapshots").mkdir(exist_ok=True)
+    with atomic_path(run_dir / "snapshots" / f"epoch_{epoch:04d}.pt") as temporary:
+        torch.save(agent.policy_state_dict(), temporary)
+
+
+# ------------------------------------------------------------------ the epoch log
+class EpochLog:
+    """Where each epoch's row goes: ``progress.csv``, TensorBoard (when installed) and a progress bar.
+
+    A context manager: leaving it closes the writer and the bar.
+    """
+
+    def __init__(self, run_dir: Path, epochs: int, start_epoch: int, progress: bool) -> None:
+        self.path = run_dir / PROGRESS_FILE
+        self.writer = _tensorboard(run_dir)
+        self.bar = None
+        if progress:
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(total=epochs, initial=start_epoch, desc=run_dir.name, unit="epoch")
+
+    def __enter__(self) -> EpochLog:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.close()
+        if self.writer is not None:
+            self.writer.close()
+
+    def write(self, row: dict) -> None:
+        """Log one epoch (its ``env_steps`` is TensorBoard's step)."""
+        append_progress(self.path, row)
+        if self.writer is not None:
+            for key, value in row.items():
+                if "/" in key:
+                    name = key if key.startswith(("charts", "losses")) else f"charts/{key}"
+                    self.writer.add_scalar(name, value, row["env_steps"])
+            self.writer.flush()
+        if self.bar is not None:
+            self.bar.set_postfix(
+                test_return=f"{row['test/episodic_return']:.2f}", sps=f"{row['charts/SPS']:.0f}"
+            )
+            self.bar.update(1)
+
+
+def _tensorboard(run_dir: Path):
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:  # TensorBoard is optional; the CSV log is always written
+        return None
+    return SummaryWriter(str(run_dir))
+
+
+def read_progress(run_dir: str | Path) -> list[dict[str, float]]:
+    """The run's per-epoch log as a list of rows (numbers as floats, blanks as NaN)."""
+    with open(Path(run_dir) / PROGRESS_FILE, newline="") as handle:
+        return [
+            {key: float(value) if value not in ("", None) else float("nan") for key, value in row.items()}
+            for row in csv.DictReader(handle)
+        ]
+
+
+def append_progress(path: Path, row: dict) -> None:
+    """Append one epoch to the CSV log (rows of epochs already logged are replaced on resume)."""
+    rows = []
+    if path.exists():
+        with open(path, newline="") as handle:
+            rows = [r for r in csv.DictReader(handle) if int(r["epoch"]) < row["epoch"]]
+    rows.append(row)
+    with atomic_path(path) as temporary, open(temporary, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS, restval="")
+        writer.writeheader()
+        writer.writerows(rows)

@@ -1,0 +1,221 @@
+"""The training loop: epochs of environment steps, replay updates, a test each epoch, checkpoints.
+
+:func:`train` reads top to bottom: open the run folder, make the
+environments, the agent and its replay, restore the last checkpoint, then
+for each epoch collect ``steps_per_epoch`` steps into the replay (random
+actions for the first ``start_steps``) with bursts of updates, test the
+policy, log the epoch and checkpoint. What the files are and when they are
+written: :mod:`~tactile_braille.agents.run`. A run's extensions (the touch
+encoder) plug in through :mod:`~tactile_braille.agents.extensions`.
+``train(run_dir=..., resume=True)`` continues a run from its last checkpoint.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, TrainConfig
+from tactile_braille.agents.dqn import DQNAgent
+from tactile_braille.agents.extensions import RunExtension, make_extension
+from tactile_braille.agents.replay import EpisodeReplayBuffer
+from tactile_braille.agents.rollout import evaluate
+from tactile_braille.agents.run import (
+    Counters,
+    EpochLog,
+    open_run,
+    record_world,
+    restore_checkpoint,
+    save_checkpoint,
+    save_snapshot,
+    snapshot_epochs,
+)
+from tactile_braille.agents.sac import SACAgent
+from tactile_braille.agents.sac_discrete import DiscreteSACAgent
+from tactile_braille.agents.td3 import TD3Agent
+from tactile_braille.agents.touch import TouchAgent, feature_space, touch_input_size
+from tactile_braille.envs.registry import task_of
+from tactile_braille.supervised.touch import TouchEncoder, TouchEncoderConfig
+
+
+class Algorithm(NamedTuple):
+    agent: type
+    config: type
+    continuous: bool
+
+
+AGENTS = {
+    name: Algorithm(agent, AGENT_CONFIGS[name], continuous=name in CONTINUOUS_ALGORITHMS)
+    for name, agent in (
+        ("dqn", DQNAgent), ("sac_discrete", DiscreteSACAgent), ("sac", SACAgent), ("td3", TD3Agent)
+    )
+}  # fmt: skip
+"""Implemented algorithms: agent class, hyperparameter dataclass, action kind."""
+
+
+def train(
+    config: TrainConfig | None = None,
+    run_dir: str | Path | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    rig=None,
+) -> Path:
+    """Train (or, with ``resume``, continue) a run; returns its folder. ``rig``: see :func:`make_env`."""
+    config, run_dir = open_run(config, run_dir, resume)
+    torch.set_num_threads(config.threads)
+    env, test_env = make_env(config, rig), make_env(config, rig)
+    record_world(run_dir, env, resume)
+    torch.manual_seed(config.seed)  # before the networks are made: the seed fixes their initial weights
+    agent = make_agent(config, env)
+    buffer = make_replay(config, env)
+    rng = np.random.default_rng(config.seed)
+    counters = restore_checkpoint(run_dir, agent, buffer, rng) if resume else Counters()
+    extension = make_extension(config, env, agent, buffer, run_dir)
+    episodes = Episodes(env, buffer, extension, rng)
+    burst, batch_size = config.update_every * config.updates_per_step, config.agent.batch_size
+    losses: dict[str, float] = {}
+    with EpochLog(run_dir, config.epochs, counters.epoch, progress) as log:
+        for epoch in range(counters.epoch, config.epochs):
+            started = time.perf_counter()
+            for _ in range(config.steps_per_epoch):
+                if counters.env_steps < config.start_steps:
+                    action = random_action(env.action_space, rng)
+                else:
+                    action = agent.policy_action(
+                        episodes.observation, counters.env_steps, explore=True, rng=rng
+                    )
+                episodes.step(action)
+                counters.env_steps += 1
+                extension.after_step(counters.env_steps)
+                if updates_due(config, counters.env_steps, buffer):
+                    for _ in range(burst):
+                        # Merged, so that a loss some updates skip (TD3's delayed actor) keeps its last value.
+                        losses.update(agent.update(buffer.sample(batch_size, rng)))
+                        counters.updates += 1
+            train_time = time.perf_counter() - started
+            tests = evaluate(agent, test_env, config.evaluation.test_episodes, seed=10_000 * (epoch + 1))
+            counters.epoch = epoch
+            log.write({
+                "epoch": epoch, "env_steps": counters.env_steps, "updates": counters.updates,
+                **episodes.take_returns(), **tests, **losses,
+                "charts/SPS": config.steps_per_epoch / train_time, "time_s": time.perf_counter() - started,
+            })  # fmt: skip
+            if epoch in snapshot_epochs(config.epochs, config.evaluation.snapshots):
+                save_snapshot(run_dir, agent, epoch)
+            if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
+                save_checkpoint(run_dir, agent, buffer, rng, counters)
+    return run_dir
+
+
+def updates_due(config: TrainConfig, env_steps: int, buffer: EpisodeReplayBuffer) -> bool:
+    """Whether a burst of updates follows this step: after the start steps, every ``update_every``
+    steps, once the replay holds a batch."""
+    return (
+        env_steps >= config.start_steps
+        and env_steps % config.update_every == 0
+        and buffer.size >= config.agent.batch_size
+    )
+
+
+def random_action(space: gym.Space, rng: np.random.Generator):
+    """A uniformly random action of the start steps (in [-1, 1] for continuous actions)."""
+    if isinstance(space, gym.spaces.Box):
+        return rng.uniform(-1.0, 1.0, size=space.shape).astype(np.float32)
+    return int(rng.integers(space.n))
+
+
+class Episodes:
+    """The training environment's episodes as they are collected into the replay.
+
+    :meth:`step` acts, stores the transition (with the extension's labels of
+    its frame) and starts the next episode when one ends; the start poses are
+    drawn from the run's generator.
+    """
+
+    def __init__(self, env: gym.Env, buffer: EpisodeReplayBuffer, extension: RunExtension, rng) -> None:
+        self.env, self.buffer, self.extension, self.rng = env, buffer, extension, rng
+        self.returns: list[float] = []
+        self._start()
+
+    def _start(self) -> None:
+        self.observation, info = self.env.reset(seed=int(self.rng.integers(2**31)))
+        self.buffer.start_episode(self.observation, self.extension.label(self.observation, info))
+        self.episode_return = 0.0
+
+    def step(self, action) -> None:
+        """One environment step, stored; a new episode if it ended."""
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self.buffer.add_step(action, reward, observation, terminated, self.extension.label(observation, info))
+        self.observation, self.episode_return = observation, self.episode_return + reward
+        if terminated or truncated:
+            self.buffer.end_episode()
+            self.returns.append(self.episode_return)
+            self._start()
+
+    def take_returns(self) -> dict[str, float]:
+        """Episodes ended and their mean return since the last call (the epoch's training figures)."""
+        returns, self.returns = self.returns, []
+        mean = float(np.mean(returns)) if returns else float("nan")
+        return {"train/episodes": len(returns), "train/episodic_return": mean}
+
+
+def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
+    """The task's environment as the run configures it (other goal-conditioned ids are made as they are).
+
+    ``rig`` is the :class:`~tactile_braille.rigs.base.Rig` that ``backend="rig"`` taps: hardware is
+    handed in, not configured, so a run folder never names one. ``kwargs`` go to ``gym.make``
+    (``render_mode`` for figures).
+    """
+    if rig is not None and config.backend != "rig":
+        raise ValueError(f"a rig was given, but the run's backend is {config.backend!r}: set backend='rig'")
+    if task_of(config.task) is not None:
+        kwargs["backend"] = config.backend
+        if config.dataset is not None:
+            kwargs["dataset"] = config.dataset
+        if rig is not None:
+            kwargs["rig"] = rig
+    if config.max_episode_steps is not None:
+        kwargs["max_episode_steps"] = config.max_episode_steps
+    return gym.make(config.task, **kwargs)
+
+
+def make_agent(config: TrainConfig, env: gym.Env):
+    """The run's agent for the task's spaces (a :class:`TouchAgent` with ``touch.enabled``)."""
+    algorithm = AGENTS[config.algo]
+    if isinstance(env.action_space, gym.spaces.Box) != algorithm.continuous:
+        raise ValueError(f"{config.algo} cannot act in {config.task}'s action space {env.action_space}")
+    if not config.touch.enabled:
+        return algorithm.agent(
+            env.observation_space, env.action_space, config.agent, config.device, config.precision
+        )
+    keys = env.observation_space["desired_goal"].shape[0]
+    encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden)
+    positions = None
+    if config.touch.goal_positions:
+        layout = env.unwrapped.layout
+        positions = np.array([layout.centre_mm(key) for key in env.unwrapped.goal_keys])
+    size = touch_input_size(encoder, config.touch.inputs)
+    space = feature_space(env.observation_space, size, goal_positions=positions is not None)
+    agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
+    return TouchAgent(agent, encoder, key_positions_mm=positions, inputs=config.touch.inputs)
+
+
+def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
+    """The run's replay buffer for the task's spaces."""
+    spaces = env.observation_space
+    return EpisodeReplayBuffer(
+        config.replay.capacity,
+        spaces["desired_goal"].shape[0],
+        env.action_space.shape if isinstance(env.action_space, gym.spaces.Box) else (),
+        spaces["previous_action"].shape[0],
+        her=config.replay.her,
+        max_episode_steps=max(getattr(env.spec, "max_episode_steps", None) or 0, 100),
+        relabel=config.replay.relabel,
+        observation_shape=spaces["observation"].shape,
+        poses=getattr(config.agent, "critic_pose", False),
+    )

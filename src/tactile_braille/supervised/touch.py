@@ -1,0 +1,304 @@
+"""A touch encoder learnt from labelled taps: supervised learning on what the robot knows.
+
+A robot knows three things about every tap without touch: where the sensor
+was (the arm's kinematics), which key lies under it there (the calibrated
+keyboard layout, :class:`KeyLocator`) and which key, if any, the keyboard
+reported. :class:`LabelledTaps` holds tactile images with those labels
+(:func:`observation_label` reads them off an environment's step), and
+:func:`fit_touch_encoder` fits a :class:`TouchEncoder` (the paper's
+convolutions, :class:`~tactile_braille.supervised.networks.Encoder`, a
+projection to a few features, three heads) to predict the three from the
+image, with the supervised fit loop the key classifier uses
+(:func:`~tactile_braille.supervised.fit.fit_minibatches`).
+
+It is supervised learning on labelled images, like the key classifier, so it
+lives here; the reinforcement-learning side lives in
+:mod:`~tactile_braille.agents.touch` (``TouchAgent``: an agent acting on the
+frozen encoder's features) and :mod:`~tactile_braille.agents.training` (the taps
+are the run's own steps, labelled in its replay, and the encoder is refitted
+on them every ``touch_refit_every`` steps). Nothing about the goal or the
+reward is used.
+
+>>> import numpy as np
+>>> taps = LabelledTaps()
+>>> taps.add(np.zeros((100, 100, 1), np.uint8), np.array([0.0, 1.0, 4.0]), pressed=-1)
+>>> len(taps)
+1
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from tactile_braille.supervised.fit import adam, fit_minibatches
+from tactile_braille.supervised.networks import IMAGE_SIZE_PX, Encoder
+
+
+@dataclass(frozen=True)
+class TouchEncoderConfig:
+    """How the touch encoder is made and fitted.
+
+    Attributes:
+        features: length of the feature vector the agent sees.
+        hidden: units of the projection between the convolutions and the features.
+        epochs: passes over the labelled taps.
+        batch_size: taps per gradient step.
+        learning_rate: Adam's step size.
+        validation: fraction of the taps held out to report the fit.
+    """
+
+    features: int = 64
+    hidden: int = 256
+    epochs: int = 40
+    batch_size: int = 64
+    learning_rate: float = 1e-3
+    validation: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("features", "hidden", "epochs", "batch_size"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"TouchEncoderConfig.{name} must be at least 1, got {getattr(self, name)}")
+        if self.learning_rate <= 0:
+            raise ValueError(f"TouchEncoderConfig.learning_rate must be positive, got {self.learning_rate}")
+        if not 0.0 <= self.validation < 1.0:
+            raise ValueError(f"TouchEncoderConfig.validation must be in [0, 1), got {self.validation}")
+
+
+class TouchEncoder(nn.Module):
+    """The paper's convolutions, a projection to ``features`` (layer-normalised), and three heads.
+
+    The heads predict the sensor pose (x, y, depth in mm, through the
+    labels' mean and spread kept as buffers), the pressed key and the key
+    under the sensor (each over the ``keys`` task keys and a last class for
+    none or another key).
+    """
+
+    def __init__(self, keys: int, features: int = 64, hidden: int = 256) -> None:
+        super().__init__()
+        self.encoder = Encoder()
+        self.project = nn.Sequential(
+            nn.Linear(Encoder.output_size, hidden),
+            nn.ReLU(),
+            nn.Linear(hidden, features),
+            nn.LayerNorm(features),
+        )
+        self.pose = nn.Linear(features, 3)
+        self.key = nn.Linear(features, keys + 1)
+        self.under = nn.Linear(features, keys + 1)
+        self.register_buffer("pose_mean", torch.zeros(3))
+        self.register_buffer("pose_scale", torch.ones(3))
+        self.keys, self.features_size = keys, features
+
+    def features(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, features) from (B, 1, 100, 100) images."""
+        return self.project(self.encoder(images))
+
+    def forward(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised pose predictions (B, 3) and pressed-key logits (B, keys + 1)."""
+        features = self.features(images)
+        return self.pose(features), self.key(features)
+
+    def heads(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Pose predictions, pressed-key logits and under-the-sensor logits."""
+        features = self.features(images)
+        return self.pose(features), self.key(features), self.under(features)
+
+    def standardise(self, poses_mm: np.ndarray) -> np.ndarray:
+        """Poses in mm, (..., 3) or (..., 2) for x and y, in the pose head's standardised coordinates
+        (the labels' mean and spread at the last fit)."""
+        size = np.shape(poses_mm)[-1]
+        mean, scale = self.pose_mean.cpu().numpy()[:size], self.pose_scale.cpu().numpy()[:size]
+        return ((poses_mm - mean) / scale).astype(np.float32)
+
+    @property
+    def readout_size(self) -> int:
+        """Length of :meth:`read`'s vectors: the pose and two key distributions."""
+        return 3 + 2 * (self.keys + 1)
+
+    @torch.no_grad()
+    def encode(self, images: np.ndarray) -> np.ndarray:
+        """Features of uint8 images ((B, 1, 100, 100) or (B, 100, 100, 1)) as float32 (B, features)."""
+        return self.features(self._tensor(images)).float().cpu().numpy()
+
+    @torch.no_grad()
+    def read(self, images: np.ndarray) -> np.ndarray:
+        """What the heads read from images, float32 (B, :attr:`readout_size`): the standardised pose,
+        then the probabilities of the pressed key and of the key under the sensor.
+
+        Unlike the features, whose meaning a refit is free to change, each number keeps its meaning
+        from one fit to the next: a learner on the readout keeps what it learnt when the encoder improves.
+        The pose's standardisation is the labels' mean and spread at the last fit, which settles as
+        taps accumulate (in a continuous-alphabet run, it moves by about 1-1.5 % of the spread from one
+        refit to the next after the first 5,000 taps).
+        """
+        pose, pressed, under = self.heads(self._tensor(images))
+        return torch.cat([pose, pressed.softmax(-1), under.softmax(-1)], -1).float().cpu().numpy()
+
+    def _tensor(self, images: np.ndarray) -> torch.Tensor:
+        images = np.asarray(images)
+        if images.ndim == 4 and images.shape[-1] == 1:
+            images = np.moveaxis(images, -1, 1)
+        return torch.as_tensor(images, device=self.pose_mean.device)
+
+
+class KeyLocator:
+    """The task key whose cell (keycap plus its share of the gap) holds a keyboard-frame position.
+
+    Args:
+        layout: the keyboard (calibrated: its frame is the rig's).
+        keys: the task's keys, in goal order.
+    """
+
+    def __init__(self, layout, keys) -> None:
+        self.centres = np.array([layout.centre_mm(k) for k in keys])
+        # Cells on the layout's own pitch (``Key.footprint_mm`` assumes the nominal 19 mm).
+        pitch = layout.pitch_mm
+        self.half = np.array([(pitch, layout.key(k).width_u * pitch) for k in keys]) / 2
+
+    def __call__(self, pose_mm: np.ndarray) -> int:
+        """Goal index of the key under (x, y), -1 for none of the task's keys."""
+        inside = np.flatnonzero((np.abs(self.centres - np.asarray(pose_mm)[:2]) < self.half).all(-1))
+        return int(inside[0]) if len(inside) else -1
+
+
+class LabelledTaps:
+    """Tactile images with the arm's pose, the key under the sensor and the key the keyboard reports.
+
+    Keys are goal indices, -1 for none (or a key outside the task).
+    """
+
+    def __init__(self) -> None:
+        self.images: list[np.ndarray] = []
+        self.poses: list[np.ndarray] = []
+        self.pressed: list[int] = []
+        self.under: list[int] = []
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+    def add(self, image: np.ndarray, pose_mm: np.ndarray, pressed: int, under: int = -1) -> None:
+        """One tap: a 100x100 image, the sensor's (x, y, depth) in mm, the pressed key, the key under it."""
+        self.images.append(np.asarray(image, dtype=np.uint8).reshape(IMAGE_SIZE_PX, IMAGE_SIZE_PX))
+        self.poses.append(np.asarray(pose_mm, dtype=np.float32)[:3])
+        self.pressed.append(int(pressed))
+        self.under.append(int(under))
+
+    def add_observation(
+        self, observation: dict[str, np.ndarray], info: dict, locate: KeyLocator | None = None
+    ) -> None:
+        """A tap as an environment reports it (``sensor_pose_mm`` in info, the achieved goal)."""
+        x, y, depth, pressed, under = observation_label(observation, info, locate)
+        self.add(observation["observation"], np.array([x, y, depth]), int(pressed), int(under))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Images (N, 1, 100, 100) uint8, poses (N, 3) float32, pressed keys (N,) int64."""
+        return np.stack(self.images)[:, None], np.stack(self.poses), np.array(self.pressed, dtype=np.int64)
+
+    @classmethod
+    def from_arrays(cls, images, poses, pressed, under) -> LabelledTaps:
+        """Taps from arrays (as :meth:`EpisodeReplayBuffer.labelled_frames` returns them)."""
+        if not (len(images) == len(poses) == len(pressed) == len(under)):
+            raise ValueError("images, poses and keys differ in number")
+        taps = cls()
+        for image, pose, key, below in zip(images, poses, pressed, under, strict=True):
+            taps.add(image, pose, int(key), int(below))
+        return taps
+
+    @staticmethod
+    def label(pose_mm: np.ndarray, pressed: int, under: int) -> np.ndarray:
+        """A frame's labels as the replay stores them: x, y, depth, pressed key, key under the sensor."""
+        return np.array([*np.asarray(pose_mm, dtype=np.float32)[:3], pressed, under], dtype=np.float32)
+
+
+def observation_label(
+    observation: dict[str, np.ndarray], info: dict, locate: KeyLocator | None
+) -> np.ndarray:
+    """The labels of an environment's observation (:meth:`LabelledTaps.label`): the sensor pose in
+    ``info``, the pressed task key from the achieved goal, and the key under the sensor (-1 without
+    a locator)."""
+    achieved = observation["achieved_goal"]
+    pose = info["sensor_pose_mm"]
+    pressed = int(achieved.argmax()) if achieved.any() else -1
+    return LabelledTaps.label(pose, pressed, locate(pose) if locate is not None else -1)
+
+
+def fit_touch_encoder(
+    taps: LabelledTaps,
+    keys: int,
+    config: TouchEncoderConfig | None = None,
+    seed: int = 0,
+    device: str | torch.device = "cpu",
+    init: TouchEncoder | None = None,
+) -> tuple[TouchEncoder, dict[str, float]]:
+    """Fit a :class:`TouchEncoder` to labelled taps; returns it (frozen, eval mode) and held-out figures.
+
+    ``init``: an encoder whose weights the fit starts from (a refit), else a fresh one.
+
+    The figures, on the held-out taps: ``touch/pose_error_mm`` (median
+    distance in the plane), ``touch/depth_error_mm`` (median),
+    ``touch/key_accuracy`` (pressed key, "none" included),
+    ``touch/under_accuracy`` (key under the sensor, "none" included), plus
+    the number of taps (``touch/taps``).
+    """
+    config = config or TouchEncoderConfig()
+    if len(taps) < 10:
+        raise ValueError(f"the touch encoder needs at least 10 labelled taps, got {len(taps)}")
+    images, poses, pressed = taps.arrays()
+    under = np.array(taps.under, dtype=np.int64)
+    if max(pressed.max(), under.max()) >= keys:
+        raise ValueError(
+            f"a tap is labelled with key {max(pressed.max(), under.max())}, but the task has {keys} keys"
+        )
+    generator = torch.Generator().manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(len(taps))
+    held = order[: min(round(config.validation * len(taps)), len(taps) - 1)]  # keep one tap to train on
+    train = order[len(held) :]
+    device = torch.device(device)
+    model = TouchEncoder(keys, config.features, config.hidden).to(device)
+    if init is not None:
+        model.load_state_dict(init.state_dict())
+        model.requires_grad_(True)
+    mean, scale = poses[train].mean(0), poses[train].std(0) + 1e-3
+    model.pose_mean.copy_(torch.as_tensor(mean))
+    model.pose_scale.copy_(torch.as_tensor(scale))
+    images_t = torch.as_tensor(images, device=device)
+    targets = torch.as_tensor((poses - mean) / scale, device=device)
+    labels = torch.as_tensor(np.where(pressed < 0, keys, pressed), device=device)
+    under_labels = torch.as_tensor(np.where(under < 0, keys, under), device=device)
+    optimiser = adam(model.parameters(), config.learning_rate)
+    steps = config.epochs * math.ceil(len(train) / config.batch_size)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, config.learning_rate, total_steps=steps)
+    train_index = torch.as_tensor(train, device=device)
+
+    def batch_loss(batch: torch.Tensor) -> torch.Tensor:
+        index = train_index[batch.to(device)]
+        pose, logits, under_logits = model.heads(images_t[index])
+        return (
+            F.smooth_l1_loss(pose, targets[index])
+            + F.cross_entropy(logits, labels[index])
+            + F.cross_entropy(under_logits, under_labels[index])
+        )
+
+    fit_minibatches(
+        model, len(train), batch_loss, optimiser, config.epochs, config.batch_size, generator, schedule
+    )
+    model.eval().requires_grad_(False)
+    metrics = {"touch/taps": float(len(taps))}
+    if len(held):
+        with torch.no_grad():
+            pose, logits, under_logits = model.heads(images_t[torch.as_tensor(held, device=device)])
+        error = (pose.cpu().numpy() - targets[held].cpu().numpy()) * scale
+        metrics["touch/pose_error_mm"] = float(np.median(np.linalg.norm(error[:, :2], axis=-1)))
+        metrics["touch/depth_error_mm"] = float(np.median(np.abs(error[:, 2])))
+        metrics["touch/key_accuracy"] = float((logits.argmax(-1).cpu() == labels[held].cpu()).float().mean())
+        metrics["touch/under_accuracy"] = float(
+            (under_logits.argmax(-1).cpu() == under_labels[held].cpu()).float().mean()
+        )
+    return model, metrics
