@@ -129,6 +129,7 @@ def read_progress(run_dir) -> list[dict]:
         return list(csv.DictReader(handle))
 
 
+@pytest.mark.slow
 def test_dqn_with_her_solves_discrete_arrows(env_datasets, tmp_path):
     """A real learning run (about a minute): the paper's DQN + HER, one update per step."""
     config = TrainConfig(

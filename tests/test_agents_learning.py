@@ -42,6 +42,7 @@ def run(tmp_path, name: str, **settings) -> list[float]:
     return [row["test/episodic_return"] for row in read_progress(folder)]
 
 
+@pytest.mark.slow
 def test_her_solves_bit_flipping_that_fails_without_it(tmp_path):
     """Six bits: random pressing succeeds once in 64 episodes; the paper's HER rule makes it learnable."""
     common = {"task": "toys/BitFlipPress-v0", "algo": "dqn", "steps_per_epoch": 200}
@@ -51,6 +52,7 @@ def test_her_solves_bit_flipping_that_fails_without_it(tmp_path):
     assert max(without_her) <= 0.2, without_her
 
 
+@pytest.mark.slow
 def test_sac_learns_to_tap_the_goal_cell(tmp_path):
     """SAC reads its position from the image and taps the goal cell (random: 0.25)."""
     returns = run(

@@ -209,7 +209,7 @@ def test_the_touch_wrapper_standardises_poses_as_the_encoders_targets():
 
 # ---------------------------------------------------------------- training runs and the preset
 def test_critic_pose_needs_the_touch_encoders_labelled_frames(env_datasets):
-    with pytest.raises(ValueError, match="critic_pose learns from a touch encoder.*set touch.enabled too"):
+    with pytest.raises(ValueError, match=r"critic_pose learns from a touch encoder.*set touch.enabled too"):
         TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), agent=SACConfig(critic_pose=True))
 
 
@@ -293,7 +293,7 @@ def test_goal_positions_need_a_touch_encoder_and_a_keyboard(env_datasets):
         ValueError, match=r"touch.goal_positions learns from a touch encoder.* set touch.enabled too"
     ):
         TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch={"goal_positions": True})
-    with pytest.raises(ValueError, match="touch.inputs='readout' learns from a touch encoder"):
+    with pytest.raises(ValueError, match=r"touch.inputs='readout' learns from a touch encoder"):
         TrainConfig(task=TASK, algo="sac", dataset=str(env_datasets[TASK]), touch={"inputs": "readout"})
     with pytest.raises(ValueError, match="a keyboard layout"):
         TrainConfig(task="toys/BitFlipPress-v0", algo="dqn", touch={"enabled": True, "goal_positions": True})
@@ -383,7 +383,7 @@ def test_a_run_on_the_readout_learns_and_acts_on_it(env_datasets, tmp_path):
     assert agent.policy_action(observation, 0, explore=False, rng=np.random.default_rng(0)).shape == (
         ACTIONS,
     )
-    with pytest.raises(ValueError, match="TouchConfig.inputs must be one of"):
+    with pytest.raises(ValueError, match=r"TouchConfig.inputs must be one of"):
         config.with_changes(touch={"inputs": "pixels"})
 
 

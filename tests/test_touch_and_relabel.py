@@ -1105,7 +1105,7 @@ def test_touch_fit_steps_follow_the_start_steps_at_the_refit_interval(env_datase
     assert touch_fit_steps(touch_config(env_datasets, touch={"refits": 3})) == (12, 24, 36, 48)
     every = touch_config(env_datasets, touch={"refits": 2, "refit_every": 5})
     assert touch_fit_steps(every) == (12, 17, 22)
-    with pytest.raises(ValueError, match="TouchConfig.refit_every must be at least 1"):
+    with pytest.raises(ValueError, match=r"TouchConfig.refit_every must be at least 1"):
         touch_config(env_datasets, touch={"refit_every": 0})
 
 
