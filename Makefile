@@ -7,12 +7,14 @@ OUT ?= outputs
 
 .PHONY: run test test-slow lint bench results clean
 
-# torch is pinned to the CPU build that the project's machines hold; a looser
-# pin would download gigabytes of CUDA packages.
+# torch is pinned to the version whose CPU build the project's machines hold; a looser
+# pin would download gigabytes of CUDA packages. Elsewhere, for the CPU wheel:
+# make test TORCH_PIP_ARGS="--index-url https://download.pytorch.org/whl/cpu"
+TORCH_PIP_ARGS ?=
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet torch==2.13.0
+	$(PY) -m pip install --quiet torch==2.13.0 $(TORCH_PIP_ARGS)
 	$(PY) -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 

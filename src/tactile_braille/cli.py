@@ -9,8 +9,6 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
 from tactile_braille.agents.config import ALGORITHMS, BACKENDS, PRECISIONS
 from tactile_braille.agents.presets import PRESETS as TRAINING_PRESETS
 from tactile_braille.gallery import GALLERY_DEPTH_MM
@@ -248,37 +246,20 @@ def _load_named_dataset(name_or_path: str, sensor: str, seed: int):
 def _classify(args: argparse.Namespace) -> int:
     import torch
 
-    from tactile_braille.supervised.classifier import (
-        ClassifierConfig,
-        confusion_matrix,
-        predict,
-        save_classifier,
-        select_classes,
-        train_classifier,
-    )
-    from tactile_braille.supervised.report import save_confusion_matrix, top_confusions
+    from tactile_braille.supervised.classifier import ClassifierConfig, train_classifier
+    from tactile_braille.supervised.report import evaluate_classifier
 
     torch.set_num_threads(args.threads)
     train = _load_named_dataset(args.train, args.sensor, 0)
     validation = _load_named_dataset(args.validation, args.sensor, 0)
-    config = ClassifierConfig(max_epochs=args.epochs, seed=args.seed)
     start = time.perf_counter()
+    config = ClassifierConfig(max_epochs=args.epochs, seed=args.seed)
     result = train_classifier(train, validation, config, progress=True)
-    images, labels = select_classes(validation, config.classes)
-    truth = [config.classes[i] for i in labels]
-    predicted = predict(result.model, images, config.classes)
-    accuracy = float((predicted == np.asarray(truth)).mean())
-    matrix = confusion_matrix(np.asarray(truth), predicted, config.classes)
-    mistakes = top_confusions(matrix, config.classes)
     output = Path(args.output or f"runs/classifier__seed{args.seed}__{time.strftime('%Y%m%d-%H%M%S')}")
-    metrics = {"val_accuracy": accuracy, "top_confusions": mistakes}
-    metrics.update(train=str(train.path), validation=str(validation.path))
-    save_classifier(result, output, metrics)
-    save_confusion_matrix(matrix, config.classes, output / "confusion.png",
-                          f"validation accuracy {accuracy:.1%} ({len(truth)} images)")  # fmt: skip
-    print(f"validation accuracy {accuracy:.2%} on {len(truth)} images, best epoch {result.best_epoch}, "
-          f"{time.perf_counter() - start:.0f} s")  # fmt: skip
-    for mistake in mistakes[:5]:
+    scored = evaluate_classifier(result, validation, output, train_path=train.path)
+    print(f"validation accuracy {scored.accuracy:.2%} on {scored.images} images, "
+          f"best epoch {result.best_epoch}, {time.perf_counter() - start:.0f} s")  # fmt: skip
+    for mistake in scored.mistakes[:5]:
         print(
             f"  {mistake['true']} -> {mistake['predicted']}: {mistake['count']}"
             + (f" (differ by dots {mistake['dots_differing']})" if "dots_differing" in mistake else "")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -42,3 +43,38 @@ def save_confusion_matrix(
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     return save_figure(fig, output)
+
+
+@dataclass
+class ClassifierEvaluation:
+    """A trained classifier on a validation set: accuracy, confusion matrix and its largest mistakes."""
+
+    accuracy: float
+    images: int
+    matrix: np.ndarray
+    mistakes: list[dict]
+
+
+def evaluate_classifier(result, validation, folder: str | Path, train_path=None) -> ClassifierEvaluation:
+    """Score ``result`` (a :class:`~tactile_braille.supervised.classifier.TrainingResult`) on the
+    ``validation`` dataset and write the classifier, its metrics and its confusion matrix to ``folder``."""
+    from tactile_braille.supervised.classifier import (
+        confusion_matrix,
+        predict,
+        save_classifier,
+        select_classes,
+    )
+
+    classes = result.config.classes
+    images, labels = select_classes(validation, classes)
+    truth = np.asarray([classes[i] for i in labels])
+    predicted = predict(result.model, images, classes)
+    accuracy = float((predicted == truth).mean())
+    matrix = confusion_matrix(truth, predicted, classes)
+    mistakes = top_confusions(matrix, classes)
+    metrics = {"val_accuracy": accuracy, "top_confusions": mistakes,
+               "train": str(train_path), "validation": str(validation.path)}  # fmt: skip
+    save_classifier(result, folder, metrics)
+    save_confusion_matrix(matrix, classes, Path(folder) / "confusion.png",
+                          f"validation accuracy {accuracy:.1%} ({len(truth)} images)")  # fmt: skip
+    return ClassifierEvaluation(accuracy, len(truth), matrix, mistakes)
