@@ -27,6 +27,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
+from tactile_braille.agents.config import TOUCH_INPUTS
 from tactile_braille.supervised.touch import TouchEncoder
 
 
@@ -132,9 +133,6 @@ class TouchAgent:
             raise ValueError("policy snapshot lacks the touch encoder of a touch-encoder run")
         self.agent.load_policy_state_dict({k: v for k, v in state.items() if k != "touch"})
         self.touch.load_state_dict(state["touch"])
-
-
-TOUCH_INPUTS = ("features", "readout")
 
 
 def touch_input_size(encoder: TouchEncoder, inputs: str) -> int:
