@@ -1,8 +1,8 @@
-"""The pre-split replay buffer, kept verbatim to prove the split one equivalent (tests/test_replay.py).
+"""The pre-split replay buffer, kept verbatim to prove the split one equivalent (tests/agents/test_replay.py).
 
 A frozen copy of ``tactile_braille.agents.replay`` as it was before ``EpisodeReplayBuffer`` was
 split into a frame store, a relabelling strategy and a feature cache; only this paragraph is new.
-Do not edit it: tests/test_replay.py drives it and the new buffer with the same calls and asserts
+Do not edit it: tests/agents/test_replay.py drives it and the new buffer with the same calls and asserts
 equal samples, equal generator draws and interchangeable checkpoints.
 
 Episode replay with the paper's Hindsight Experience Replay, storing each image once.

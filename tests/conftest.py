@@ -2,6 +2,14 @@
 
 Every module runs with the default-dataset cache pointed at a temporary folder,
 so no test reads or writes the user's cache.
+
+The test modules sit in folders that mirror the package (tests/agents/ for
+``tactile_braille.agents``, tests/keyboard/ for ``tactile_braille.keyboard``...),
+with no ``__init__.py``: pytest imports each module by its file name, so file
+names must be unique across tests/ (hence datasets/test_datasets_cli.py beside
+test_cli.py). Helper modules imported by name (toys, envs_helpers,
+conftest_datasets, replay_helpers, agents_helpers, feature_agents,
+_replay_before) live here in tests/, which pytest puts on sys.path.
 """
 
 from __future__ import annotations

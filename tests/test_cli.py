@@ -1,9 +1,14 @@
-"""The ``tactile-braille`` command line."""
+"""The ``tactile-braille`` command line: ``show``, usage errors, and ``train`` (a short run, bad options)."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
+from agents_helpers import CONTINUOUS_TASK, train_module
+from tactile_braille import cli
+from tactile_braille.agents import read_progress
 from tactile_braille.cli import build_parser, main
 from tactile_braille.gallery import GALLERY_DEPTH_MM
 
@@ -43,3 +48,60 @@ def test_bad_arguments_exit_with_usage_error(argv, capsys):
         main(argv)
     assert info.value.code == 2
     assert "usage: tactile-braille" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- train
+@pytest.mark.usefixtures("one_torch_thread")
+def test_cli_train_uses_the_released_preset_and_the_options(env_datasets, tmp_path, monkeypatch, capsys):
+    """A real ``tactile-braille train`` run, made short: steps per epoch and the dataset are not CLI
+    options, so ``train`` is wrapped to set them on the config the CLI built (and to record it)."""
+    built = []
+    real_train = train_module.train
+
+    def short_train(config=None, run_dir=None, resume=False, progress=True, rig=None):
+        built.append(config)
+        config = config.with_changes(
+            steps_per_epoch=20, start_steps=10, dataset=str(env_datasets[CONTINUOUS_TASK])
+        )
+        return real_train(config, run_dir=run_dir, resume=resume, progress=progress, rig=rig)
+
+    monkeypatch.setattr(train_module, "train", short_train)
+    run = tmp_path / "cli"
+    code = cli.main([
+        "train", "ContinuousArrows-v0", "td3", "--preset", "released", "--epochs", "1",
+        "--test-episodes", "1", "--threads", "1", "--run-dir", str(run), "--quiet", "--precision", "bf16",
+        "--updates-per-step", "3", "--checkpoint-every", "1", "--shared-encoder",
+    ])  # fmt: skip
+    assert code == 0
+    assert f"run folder: {run}" in capsys.readouterr().out
+    (config,) = built
+    assert config.task == CONTINUOUS_TASK and config.algo == "td3"
+    data = json.loads((run / "config.json").read_text())
+    assert data["preset"] == "released"
+    assert data["agent"]["learning_rate"] == 7.5e-5 and data["update_every"] == 100
+    assert data["agent"]["shared_encoder"] is True
+    assert (data["epochs"], data["evaluation"]["test_episodes"], data["threads"]) == (1, 1, 1)
+    assert (data["precision"], data["updates_per_step"], data["checkpoint_every"]) == ("bf16", 3, 1)
+    assert len(read_progress(run)) == 1
+
+
+@pytest.mark.usefixtures("one_torch_thread")
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ["train", "DiscreteArrows-v0", "dqn", "--shared-encoder"],
+            "--agent.shared-encoder is not a setting of dqn",
+        ),
+        (["train", "Piano-v0", "dqn"], "Piano-v0"),
+        (["train", "DiscreteArrowsX-v0", "dqn"], "unknown task"),
+        (["train", "DiscreteArrows-v0", "td3"], "td3 needs a continuous task"),
+        (["train"], "TASK"),
+    ],
+)
+def test_cli_train_argument_errors(argv, message, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # nothing may be written, but never into the repository
+    assert cli.main(argv) == 2
+    captured = capsys.readouterr()
+    assert "error" in captured.err and message in captured.err
+    assert not (tmp_path / "runs").exists()

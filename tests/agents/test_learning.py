@@ -1,4 +1,5 @@
-"""Small but real learning runs: HER matters on bit flipping; SAC and TD3 learn a continuous toy.
+"""Small but real learning runs (all marked slow): DQN + HER solves DiscreteArrows; HER matters on bit
+flipping; SAC and TD3 learn a continuous toy.
 
 Each runs in one to two minutes on two cores (bf16 autocast, one update per step).
 The toys (tests/toys.py) have the braille tasks' interface, so the agents,
@@ -8,12 +9,15 @@ the keyboard.
 
 from __future__ import annotations
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 import toys
+from agents_helpers import read_progress_csv
 from tactile_braille.agents import (
     EpisodeReplayBuffer,
     SACConfig,
@@ -26,6 +30,27 @@ from tactile_braille.agents import (
 from tactile_braille.agents.networks import observation_tensors
 
 toys.register()
+
+
+@pytest.mark.slow
+def test_dqn_with_her_solves_discrete_arrows(env_datasets, tmp_path):
+    """A real learning run (about a minute): the paper's DQN + HER, one update per step."""
+    config = TrainConfig(
+        task="tactile_braille/DiscreteArrows-v0",
+        epochs=6,
+        updates_per_step=1,
+        dataset=str(env_datasets["tactile_braille/DiscreteArrows-v0"]),
+        threads=1,
+        evaluation={"test_episodes": 10},
+        replay={"capacity": 10000},
+    )
+    run = train(config, run_dir=tmp_path / "run", progress=False)
+    rows = read_progress_csv(run)
+    assert [int(r["epoch"]) for r in rows] == list(range(6))
+    returns = [float(r["test/episodic_return"]) for r in rows]
+    assert returns[-1] >= 0.9, returns
+    assert returns[0] < 0.9  # it learned: an untrained policy does not type
+    assert json.loads((run / "config.json").read_text())["task"] == config.task
 
 
 def run(tmp_path, name: str, **settings) -> list[float]:

@@ -1,0 +1,438 @@
+"""The agents (agents/dqn.py, sac.py, sac_discrete.py, td3.py, common.py): shared encoders, TD3's delay,
+checkpoints and policy snapshots, spaces and precision, bf16, the temperature, asymmetric critics.
+
+Small and fast: tiny dense layers (the paper's encoder is kept), batches of a
+few transitions, one torch thread. The spaces and observations come from the
+real tasks on the small test datasets; the asymmetric critics learn from
+feature observations whose reward only the sensor pose explains
+(tests/feature_agents.py).
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK, HIDDEN, through_file
+from feature_agents import ACTIONS, FEATURES, GOALS, PREVIOUS, batch, make
+from tactile_braille.agents import AGENTS
+from tactile_braille.agents.common import POSE_SIZE
+
+ACTOR_CRITICS = ("sac_discrete", "sac", "td3")
+
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+# ---------------------------------------------------------------- agents on the tasks' spaces
+@pytest.fixture(scope="module")
+def tasks(env_datasets) -> dict[str, dict]:
+    """Spaces and a few real observations of a discrete and a continuous task."""
+    tasks = {}
+    for kind, env_id in (("discrete", DISCRETE_TASK), ("continuous", CONTINUOUS_TASK)):
+        env = gym.make(env_id, dataset=env_datasets[env_id])
+        observations = []
+        for seed in range(3):
+            observation, _ = env.reset(seed=seed)
+            observations.append(observation)
+            env.action_space.seed(seed)
+            observation, *_ = env.step(env.action_space.sample())
+            observations.append(observation)
+        tasks[kind] = {
+            "observation_space": env.observation_space,
+            "action_space": env.action_space,
+            "observations": observations,
+        }
+        env.close()
+    return tasks
+
+
+def build(algo: str, tasks: dict, seed: int = 0, precision: str = "fp32", **hyperparameters):
+    """An agent for ``algo`` with tiny dense layers, its weights drawn from torch seed ``seed``."""
+    agent_class, config_class, kind = ALGOS[algo]
+    torch.manual_seed(seed)
+    config = config_class(**{"hidden": HIDDEN, **hyperparameters})
+    task = tasks[kind]
+    return agent_class(
+        task["observation_space"], task["action_space"], config, device="cpu", precision=precision
+    )
+
+
+def make_batch(algo: str, tasks: dict, size: int = 8, seed: int = 0) -> dict[str, np.ndarray]:
+    """A replay batch by hand: binary images, one-hot goals, valid actions, some rewards and ends."""
+    task = tasks[ALGOS[algo][2]]
+    rng = np.random.default_rng(seed)
+    goals = task["observation_space"]["desired_goal"].shape[0]
+    previous = task["observation_space"]["previous_action"].shape[0]
+    action_space = task["action_space"]
+    if isinstance(action_space, gym.spaces.Discrete):
+        actions = rng.integers(action_space.n, size=size)
+    else:
+        actions = rng.uniform(-1, 1, (size, *action_space.shape)).astype(np.float32)
+
+    def images():
+        return ((rng.random((size, 1, 100, 100)) < 0.3) * 255).astype(np.uint8)
+
+    return {
+        "images": images(),
+        "previous_actions": rng.random((size, previous)).astype(np.float32),
+        "goals": np.eye(goals, dtype=np.float32)[rng.integers(goals, size=size)],
+        "actions": actions,
+        "rewards": (rng.random(size) < 0.4).astype(np.float32),
+        "next_images": images(),
+        "next_previous_actions": rng.random((size, previous)).astype(np.float32),
+        "dones": (rng.random(size) < 0.3).astype(np.float32),
+    }
+
+
+def state_inputs(agent, batch) -> tuple[torch.Tensor, ...]:
+    t = agent.tensors(batch)
+    return t["images"], t["goals"], t["previous_actions"]
+
+
+def snapshot(module: nn.Module) -> dict[str, torch.Tensor]:
+    return {name: value.detach().clone() for name, value in module.state_dict().items()}
+
+
+def same_tensors(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[name], b[name]) for name in a)
+
+
+# ---------------------------------------------------------------- shared encoder
+def actor_outputs_sum(actor, inputs) -> torch.Tensor:
+    outputs = actor(*inputs)
+    outputs = outputs if isinstance(outputs, tuple) else (outputs,)
+    return sum((o.float() * torch.linspace(0.5, 1.5, o.numel()).view_as(o)).sum() for o in outputs)
+
+
+def actor_deterministic_output(actor, inputs) -> torch.Tensor:
+    """SAC's squashed mean, discrete SAC's probabilities, TD3's action."""
+    outputs = actor(*inputs)
+    if not isinstance(outputs, tuple):
+        return outputs
+    return outputs[2] if len(outputs) == 3 else outputs[0]
+
+
+@pytest.mark.parametrize("algo", ACTOR_CRITICS)
+def test_shared_encoder_belongs_to_the_first_critic_only(algo, tasks):
+    agent = build(algo, tasks, shared_encoder=True)
+    encoder = agent.critics[0].trunk.encoder
+    encoder_ids = {id(p) for p in encoder.parameters()}
+    encoder_pointers = {p.data_ptr() for p in encoder.parameters()}
+    assert not hasattr(agent.actor.trunk, "encoder")
+    assert encoder_ids.isdisjoint(id(p) for p in agent.actor.parameters())
+    assert encoder_ids.isdisjoint(
+        id(p) for group in agent.actor_optimiser.param_groups for p in group["params"]
+    )
+    assert encoder_ids <= {id(p) for group in agent.critic_optimiser.param_groups for p in group["params"]}
+    actor_state = agent.actor.state_dict()
+    assert not any("encoder" in name for name in actor_state)
+    assert encoder_pointers.isdisjoint(value.data_ptr() for value in actor_state.values())
+    if algo == "td3":
+        assert not any("encoder" in name for name in agent.actor_target.state_dict())
+
+    batch = make_batch(algo, tasks)
+    inputs = state_inputs(agent, batch)
+    # The actor reads the critic's encoder: changing it changes the actor's output.
+    with torch.no_grad():
+        before = actor_deterministic_output(agent.actor, inputs)
+        saved = snapshot(encoder)
+        encoder.layers[0].weight.mul_(3.0)
+        after = actor_deterministic_output(agent.actor, inputs)
+        encoder.load_state_dict(saved)
+        assert torch.equal(before, actor_deterministic_output(agent.actor, inputs))
+    assert not torch.allclose(before, after, rtol=0, atol=1e-6)
+
+    # The actor's loss gives the encoder no gradient, but its own layers get one.
+    agent.critics.zero_grad(set_to_none=True)
+    agent.actor.zero_grad(set_to_none=True)
+    actor_outputs_sum(agent.actor, inputs).backward()
+    assert all(p.grad is None for p in encoder.parameters())
+    dense = agent.actor.trunk.dense[0].weight
+    assert dense.grad is not None and dense.grad.abs().sum() > 0
+    agent.actor.zero_grad(set_to_none=True)
+
+    # One update trains the encoder (through the critics' loss).
+    agent.update(batch)
+    assert not same_tensors(saved, snapshot(encoder))
+
+
+@pytest.mark.parametrize("algo", ACTOR_CRITICS)
+def test_without_sharing_the_actor_has_its_own_encoder(algo, tasks):
+    agent = build(algo, tasks, shared_encoder=False)
+    own = agent.actor.trunk.encoder
+    assert own is not agent.critics[0].trunk.encoder
+    assert {id(p) for p in own.parameters()} <= {id(p) for p in agent.actor.parameters()}
+    assert "trunk.encoder.layers.0.weight" in agent.actor.state_dict()
+    actor_outputs_sum(agent.actor, state_inputs(agent, make_batch(algo, tasks))).backward()
+    assert own.layers[0].weight.grad is not None and own.layers[0].weight.grad.abs().sum() > 0
+    assert all(p.grad is None for p in agent.critics[0].trunk.encoder.parameters())
+
+
+# ---------------------------------------------------------------- TD3's delay
+def test_td3_updates_the_actor_every_second_critic_update_and_checkpoints_the_counter(tasks):
+    agent = build("td3", tasks, policy_delay=2)
+    batch = make_batch("td3", tasks)
+    actor, actor_target, critic_targets = (
+        snapshot(agent.actor),
+        snapshot(agent.actor_target),
+        snapshot(agent.critic_targets),
+    )
+    critics = snapshot(agent.critics)
+
+    first = agent.update(batch)
+    assert int(agent.critic_updates) == 1
+    assert "losses/actor_loss" not in first
+    assert not same_tensors(critics, snapshot(agent.critics))
+    assert same_tensors(actor, snapshot(agent.actor))
+    assert same_tensors(actor_target, snapshot(agent.actor_target))
+    assert same_tensors(critic_targets, snapshot(agent.critic_targets))
+    state = through_file(agent.state_dict())  # saved between the two updates: the counter is 1
+
+    second = agent.update(batch)
+    assert int(agent.critic_updates) == 2
+    assert math.isfinite(second["losses/actor_loss"])
+    assert not same_tensors(actor, snapshot(agent.actor))
+    assert not same_tensors(actor_target, snapshot(agent.actor_target))
+    assert not same_tensors(critic_targets, snapshot(agent.critic_targets))
+
+    fresh = build("td3", tasks, seed=1, policy_delay=2)
+    fresh.load_state_dict(state)
+    assert int(fresh.critic_updates) == 1
+    loaded_actor = snapshot(fresh.actor)
+    assert "losses/actor_loss" in fresh.update(batch)  # its next update is the second: the actor's
+    assert not same_tensors(loaded_actor, snapshot(fresh.actor))
+
+
+# ---------------------------------------------------------------- checkpoints and policy snapshots
+ROUND_TRIPS = [("dqn", False), *((algo, shared) for algo in ACTOR_CRITICS for shared in (False, True))]
+
+
+@pytest.mark.parametrize(("algo", "shared"), ROUND_TRIPS)
+def test_checkpoint_round_trip_gives_the_same_actions_and_updates(algo, shared, tasks):
+    settings = {} if algo == "dqn" else {"shared_encoder": shared}
+    agent = build(algo, tasks, seed=0, **settings)
+    batch = make_batch(algo, tasks, seed=0)
+    for step in range(2):
+        agent.update(make_batch(algo, tasks, seed=10 + step))
+    fresh = build(algo, tasks, seed=99, **settings)
+    observations = tasks[ALGOS[algo][2]]["observations"]
+
+    def actions(which):
+        return [np.asarray(which.policy_action(o, 0, False, np.random.default_rng(0))) for o in observations]
+
+    fresh.load_state_dict(through_file(agent.state_dict()))
+    for mine, theirs in zip(actions(agent), actions(fresh), strict=True):
+        np.testing.assert_array_equal(mine, theirs)
+    for name in agent.checkpointed:
+        part = getattr(agent, name)
+        if isinstance(part, nn.Module):
+            assert same_tensors(snapshot(part), snapshot(getattr(fresh, name))), name
+
+    torch.manual_seed(5)
+    expected = agent.update(batch)
+    torch.manual_seed(5)
+    got = fresh.update(batch)
+    assert got == expected
+    for name in agent.checkpointed:
+        part = getattr(agent, name)
+        if isinstance(part, nn.Module):
+            assert same_tensors(snapshot(part), snapshot(getattr(fresh, name))), name
+
+    # An agent that did not load the checkpoint updates differently (the comparison can fail).
+    other = build(algo, tasks, seed=99, **settings)
+    torch.manual_seed(5)
+    assert other.update(batch) != expected
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_load_state_dict_names_a_missing_part(algo, tasks):
+    agent = build(algo, tasks)
+    state = agent.state_dict()
+    assert set(state) == set(agent.checkpointed)
+    missing = agent.checkpointed[1]
+    del state[missing]
+    with pytest.raises(ValueError, match=missing):
+        build(algo, tasks).load_state_dict(state)
+
+
+@pytest.mark.parametrize("algo", ["dqn", "sac"])
+def test_policy_snapshots_act_like_the_agent(algo, env_datasets):
+    task = CONTINUOUS_TASK if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
+    env = gym.make(task, dataset=env_datasets[task])
+    config = AGENTS[algo].config(hidden=(32,))
+    agent = AGENTS[algo].agent(env.observation_space, env.action_space, config)
+    fresh = AGENTS[algo].agent(env.observation_space, env.action_space, config)
+    snapshot = agent.policy_state_dict()
+    assert set(snapshot) == set(type(agent).policy_parts)  # no optimisers, no targets
+    fresh.load_policy_state_dict(snapshot)
+    observation, _ = env.reset(seed=4)
+    rng = np.random.default_rng(0)
+    np.testing.assert_array_equal(
+        agent.policy_action(observation, 0, explore=False, rng=rng),
+        fresh.policy_action(observation, 0, explore=False, rng=rng),
+    )
+    with pytest.raises(ValueError, match="policy snapshot lacks"):
+        fresh.load_policy_state_dict({})
+
+
+# ---------------------------------------------------------------- spaces and precision
+@pytest.mark.parametrize(
+    ("algo", "action_space", "message"),
+    [
+        ("dqn", gym.spaces.Box(-1, 1, (3,), np.float32), "Discrete"),
+        ("sac_discrete", gym.spaces.Box(-1, 1, (3,), np.float32), "Discrete"),
+        ("sac", gym.spaces.Discrete(5), r"Box\(-1, 1\)"),
+        ("td3", gym.spaces.Discrete(5), r"Box\(-1, 1\)"),
+        ("sac", gym.spaces.Box(-2, 2, (3,), np.float32), r"Box\(-1, 1\)"),
+        ("td3", gym.spaces.Box(-2, 2, (3,), np.float32), r"Box\(-1, 1\)"),
+        ("sac", gym.spaces.Box(-1, 1, (3, 2), np.float32), r"flat Box"),
+    ],
+)
+def test_wrong_action_spaces_are_refused(algo, action_space, message, tasks):
+    agent_class, config_class, kind = ALGOS[algo]
+    with pytest.raises(ValueError, match=message):
+        agent_class(tasks[kind]["observation_space"], action_space, config_class(hidden=HIDDEN))
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_unknown_precision_and_plain_observations_are_refused(algo, tasks):
+    with pytest.raises(ValueError, match="precision"):
+        build(algo, tasks, precision="fp16")
+    agent_class, config_class, kind = ALGOS[algo]
+    plain = gym.spaces.Box(0, 255, (100, 100, 1), np.uint8)
+    with pytest.raises(ValueError, match="goal-conditioned"):
+        agent_class(plain, tasks[kind]["action_space"], config_class(hidden=HIDDEN))
+
+
+# ---------------------------------------------------------------- bf16
+BF16_TOLERANCE = 0.02
+"""Largest bf16-vs-fp32 deviation of Q-values, as a share of max |Q|. bfloat16 keeps 8 bits of
+mantissa (relative step 0.4 %); measured deviations after a few updates are 0.2-0.7 %."""
+
+
+@pytest.mark.parametrize("algo", ["dqn", "sac"])
+def test_bf16_autocast_stays_close_to_fp32(algo, tasks):
+    full = build(algo, tasks, seed=0, hidden=(64,))
+    for step in range(3):  # Q-values away from their near-zero start
+        full.update(make_batch(algo, tasks, size=32, seed=20 + step))
+    half = build(algo, tasks, seed=1, precision="bf16", hidden=(64,))
+    half.load_state_dict(through_file(full.state_dict()))
+    batch = make_batch(algo, tasks, size=32, seed=3)
+    t = full.tensors(batch)
+    inputs = (t["images"], t["goals"], t["previous_actions"])
+
+    def q_values(agent):
+        with torch.no_grad(), agent.autocast():
+            if algo == "dqn":
+                return agent.q(*inputs).float()
+            return agent.critics[0](*inputs, t["actions"]).float()
+
+    q_full, q_half = q_values(full), q_values(half)
+    scale = q_full.abs().max()
+    assert scale > 0.1
+    assert not torch.equal(q_full, q_half)  # bf16 autocast is really on
+    assert (q_full - q_half).abs().max() < BF16_TOLERANCE * scale
+
+    torch.manual_seed(7)
+    losses_full = full.update(batch)
+    torch.manual_seed(7)
+    losses_half = half.update(batch)
+    loss = "losses/q_loss" if algo == "dqn" else "losses/qf_loss"
+    assert losses_half[loss] == pytest.approx(losses_full[loss], rel=0.03)
+    if algo == "sac":
+        assert losses_half["losses/actor_loss"] == pytest.approx(losses_full["losses/actor_loss"], rel=0.03)
+
+
+# ---------------------------------------------------------------- SAC's temperature
+@pytest.mark.parametrize("algo", ["sac", "sac_discrete"])
+def test_initial_temperature_is_a_hyperparameter(algo):
+    from tactile_braille.agents.presets import preset_config
+    from tactile_braille.agents.training import AGENTS
+
+    task = "tactile_braille/ContinuousArrows-v0" if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
+    env = gym.make(task)
+    algorithm = AGENTS[algo]
+    agent = algorithm.agent(env.observation_space, env.action_space, algorithm.config(initial_alpha=0.05))
+    assert float(agent.log_alpha.detach().exp()) == pytest.approx(0.05)
+    assert (
+        float(algorithm.agent(env.observation_space, env.action_space).log_alpha.detach().exp()) == 1.0
+    )  # paper
+    with pytest.raises(ValueError, match="initial_alpha must be positive"):
+        algorithm.config(initial_alpha=0.0)
+    assert preset_config("fast", task, algo).agent.initial_alpha == 0.05
+
+
+# ---------------------------------------------------------------- asymmetric critics
+def critic_error(agent, data: dict[str, np.ndarray]) -> float:
+    t = agent.tensors(data)
+    with torch.no_grad():
+        poses = (t["poses"],) if agent.config.critic_pose else ()
+        q = agent.critics[0](t["images"], t["goals"], t["previous_actions"], t["actions"], *poses)
+    return float(((q - t["rewards"]) ** 2).mean())
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_only_the_critics_see_the_pose(algo):
+    agent, plain = make(algo, True), make(algo, False)
+    first_layer = [critic.trunk.dense[0].in_features for critic in agent.critics]
+    assert first_layer == [plain.critics[0].trunk.dense[0].in_features + POSE_SIZE] * 2
+    assert agent.actor.trunk.dense[0].in_features == plain.actor.trunk.dense[0].in_features
+    observation = {
+        "observation": np.zeros(FEATURES, np.float32),
+        "previous_action": np.zeros(PREVIOUS, np.float32),
+        "desired_goal": np.eye(GOALS, dtype=np.float32)[0],
+    }
+    action = agent.policy_action(observation, 0, explore=False, rng=np.random.default_rng(0))
+    assert action.shape == (ACTIONS,)  # acting needs no pose
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_an_asymmetric_update_without_poses_says_what_is_missing(algo):
+    agent = make(algo, True)
+    with pytest.raises(ValueError, match="'poses' and 'next_poses'"):
+        agent.update(batch(np.random.default_rng(0), poses=False))
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_the_asymmetric_critic_learns_a_value_that_only_the_pose_explains(algo):
+    """The reward depends on the pose, hidden from the observation: only the pose-aware critic fits it."""
+    rng = np.random.default_rng(0)
+    agents = {pose: make(algo, pose, seed=1) for pose in (True, False)}
+    for _ in range(400):
+        data = batch(rng)
+        for agent in agents.values():
+            agent.update(data)
+    held_out = batch(np.random.default_rng(99), size=2000)
+    with_pose, without = critic_error(agents[True], held_out), critic_error(agents[False], held_out)
+    # A critic blind to the pose can do no better than the reward's variance given the action
+    # (about 0.17 for this reward); the pose-aware one approaches the noise-free target.
+    assert without > 0.12, without
+    assert with_pose < 0.5 * without, (with_pose, without)
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_targets_see_the_next_poses_and_the_critics_and_the_actors_loss_the_poses(algo):
+    agent = make(algo, True, policy_delay=1) if algo == "td3" else make(algo, True)
+    targets = agent.critic_targets if algo == "td3" else agent.targets
+    seen: dict[str, list[torch.Tensor]] = {"online": [], "target": []}
+
+    def hook(kind):
+        return lambda module, inputs: seen[kind].append(inputs[-1].detach().clone())
+
+    for critic in agent.critics:
+        critic.register_forward_pre_hook(hook("online"))
+    for target in targets:
+        target.register_forward_pre_hook(hook("target"))
+    data = batch(np.random.default_rng(0))
+    data["dones"] = np.zeros_like(data["dones"])  # the targets' values count
+    agent.update(data)
+    poses, next_poses = torch.as_tensor(data["poses"]), torch.as_tensor(data["next_poses"])
+    assert seen["target"] and all(torch.equal(p, next_poses) for p in seen["target"])
+    # Both critics' losses and the actor's loss (the first critic, or both for SAC's minimum).
+    assert len(seen["online"]) >= 3 and all(torch.equal(p, poses) for p in seen["online"])

@@ -1,0 +1,163 @@
+"""The run's configuration (agents/config.py): the agents' hyperparameters, TrainConfig's checks (tasks,
+algorithms, replay, touch encoder, asymmetric critics, placed goals), its JSON round trip, and the
+config.json of runs from before later settings existed."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import toys
+from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK, touch_config
+from tactile_braille.agents import (
+    DiscreteSACConfig,
+    DQNConfig,
+    SACConfig,
+    TD3Config,
+    TrainConfig,
+    preset_config,
+)
+from tactile_braille.agents.run import setting_differences
+
+toys.register()
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+# ---------------------------------------------------------------- the agents' hyperparameters
+@pytest.mark.parametrize(
+    ("config_class", "changes", "message"),
+    [
+        (DQNConfig, {"batch_size": 0}, "batch_size"),
+        (SACConfig, {"gamma": 1.5}, "gamma"),
+        (TD3Config, {"tau": 0.0}, "tau"),
+        (DiscreteSACConfig, {"alpha_learning_rate": -1.0}, "alpha_learning_rate"),
+        (DQNConfig, {"hidden": ()}, "hidden"),
+    ],
+)
+def test_hyperparameters_are_checked(config_class, changes, message):
+    with pytest.raises(ValueError, match=message):
+        config_class(**changes)
+
+
+def test_agent_config_must_match_the_algorithm():
+    from tactile_braille.agents import DQNConfig
+
+    with pytest.raises(ValueError, match="sac_discrete takes a DiscreteSACConfig"):
+        TrainConfig(algo="sac_discrete", agent=DQNConfig())
+
+
+# ---------------------------------------------------------------- TrainConfig's checks
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"task": "tactile_braille/Piano-v0"}, "unknown task"),
+        ({"task": "tactile_braille/ContinuousArrows-v0"}, "discrete task"),
+        ({"algo": "ppo"}, "unknown algorithm"),
+        ({"epochs": 0}, "epochs"),
+    ],
+)
+def test_train_config_rejects_bad_settings(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"task": DISCRETE_TASK, "algo": "sac"}, "sac needs a continuous task"),
+        ({"task": DISCRETE_TASK, "algo": "td3"}, "td3 needs a continuous task"),
+        ({"task": CONTINUOUS_TASK, "algo": "dqn"}, "dqn needs a discrete task"),
+        ({"task": CONTINUOUS_TASK, "algo": "sac_discrete"}, "sac_discrete needs a discrete task"),
+        ({"precision": "x"}, "precision"),
+        ({"update_every": 0}, "update_every"),
+        ({"max_episode_steps": 0}, "max_episode_steps"),
+        ({"start_steps": -1}, "start_steps"),
+    ],
+)
+def test_train_config_rejects(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"replay": {"relabel": "bogus"}}, "relabel must be one of"),
+        ({"start_steps": 9}, "at least 10"),
+        ({"touch": {"epochs": 0}}, "TouchConfig.epochs must be at least 1"),
+        ({"touch": {"refits": -1}}, "TouchConfig.refits must be at least 0"),
+    ],
+)
+def test_train_config_rejects_bad_touch_and_relabel_settings(env_datasets, changes, message):
+    with pytest.raises(ValueError, match=message):
+        touch_config(env_datasets, **changes)
+
+
+def test_few_start_steps_are_fine_without_a_touch_encoder(env_datasets):
+    assert touch_config(env_datasets, start_steps=5, touch={"enabled": False}).start_steps == 5
+
+
+def test_critic_pose_needs_the_touch_encoders_labelled_frames(env_datasets):
+    with pytest.raises(ValueError, match=r"critic_pose learns from a touch encoder.*set touch.enabled too"):
+        TrainConfig(
+            task=CONTINUOUS_TASK,
+            algo="sac",
+            dataset=str(env_datasets[CONTINUOUS_TASK]),
+            agent=SACConfig(critic_pose=True),
+        )
+
+
+def test_goal_positions_need_a_touch_encoder_and_a_keyboard(env_datasets):
+    with pytest.raises(
+        ValueError, match=r"touch.goal_positions learns from a touch encoder.* set touch.enabled too"
+    ):
+        TrainConfig(
+            task=CONTINUOUS_TASK,
+            algo="sac",
+            dataset=str(env_datasets[CONTINUOUS_TASK]),
+            touch={"goal_positions": True},
+        )
+    with pytest.raises(ValueError, match=r"touch.inputs='readout' learns from a touch encoder"):
+        TrainConfig(
+            task=CONTINUOUS_TASK,
+            algo="sac",
+            dataset=str(env_datasets[CONTINUOUS_TASK]),
+            touch={"inputs": "readout"},
+        )
+    with pytest.raises(ValueError, match="a keyboard layout"):
+        TrainConfig(task="toys/BitFlipPress-v0", algo="dqn", touch={"enabled": True, "goal_positions": True})
+
+
+# ---------------------------------------------------------------- JSON, and the configs of older runs
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_train_config_json_round_trip(algo):
+    task = CONTINUOUS_TASK if ALGOS[algo][2] == "continuous" else DISCRETE_TASK
+    for config in (
+        preset_config("released", task, algo),
+        preset_config("paper", task, algo, seed=3, precision="bf16", agent={"hidden": (64, 32)}),
+    ):
+        again = TrainConfig.from_json(json.loads(json.dumps(config.to_json())))
+        assert again == config
+        assert isinstance(again.agent.hidden, tuple)
+
+
+def test_a_run_from_before_these_settings_compares_with_their_defaults(env_datasets, tmp_path):
+    config = TrainConfig(
+        task=CONTINUOUS_TASK, algo="sac", dataset=str(env_datasets[CONTINUOUS_TASK]), touch={"enabled": True}
+    )
+    old = json.loads(json.dumps(config.to_json()))
+    for key in ("goal_positions", "inputs"):
+        del old["touch"][key]
+    del old["agent"]["critic_pose"]
+    (tmp_path / "config.json").write_text(json.dumps({**old, "epochs": 99}))
+    assert setting_differences(tmp_path, config) == []  # epochs may differ
+    changed = config.with_changes(
+        agent={"critic_pose": True}, touch={"goal_positions": True, "inputs": "readout"}
+    )
+    assert setting_differences(tmp_path, changed) == [
+        "agent.critic_pose: False -> True",
+        "touch.goal_positions: False -> True",
+        "touch.inputs: 'features' -> 'readout'",
+    ]

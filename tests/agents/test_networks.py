@@ -1,0 +1,74 @@
+"""The networks (agents/networks.py): the squashed Gaussian policy's log-probabilities, critics with poses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+from torch.distributions import Normal, TanhTransform, TransformedDistribution
+
+from feature_agents import ACTIONS, FEATURES, GOALS, PREVIOUS
+from tactile_braille.agents.common import POSE_SIZE
+from tactile_braille.agents.networks import LOG_STD_MAX, LOG_STD_MIN, ContinuousQNetwork, GaussianPolicy
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+def test_gaussian_policy_log_prob_matches_torch_distributions():
+    torch.manual_seed(0)
+    policy = GaussianPolicy(3, 4, 3, hidden=(32,))
+    with torch.no_grad():  # spread the heads so the tanh correction and the std both matter
+        nn.init.normal_(policy.mean.weight, std=0.5)
+        nn.init.normal_(policy.log_std.weight, std=0.3)
+        policy.log_std.bias.fill_(-0.5)
+    size = 64
+    generator = torch.Generator().manual_seed(1)
+    images = ((torch.rand(size, 1, 100, 100, generator=generator) < 0.3) * 255).to(torch.uint8)
+    goals = torch.eye(4)[torch.randint(4, (size,), generator=generator)]
+    previous = torch.rand(size, 3, generator=generator) * 2 - 1
+
+    torch.manual_seed(123)
+    action, log_prob, deterministic = policy(images, goals, previous)
+    with torch.no_grad():
+        hidden = policy.trunk(images, goals, previous)
+        mean = policy.mean(hidden).double()
+        log_std = policy.log_std(hidden).double().clamp(LOG_STD_MIN, LOG_STD_MAX)
+    torch.manual_seed(123)  # the forward pass draws its noise first thing from the global generator
+    noise = torch.randn(mean.shape).double()
+    raw = mean + log_std.exp() * noise
+    distribution = TransformedDistribution(Normal(mean, log_std.exp()), TanhTransform(cache_size=1))
+    squashed = distribution.transforms[0](raw)  # cached: log_prob inverts it exactly
+    expected = distribution.log_prob(squashed).sum(-1)
+
+    assert mean.abs().max() > 1.5  # samples reach the saturated part of tanh
+    gaussian_only = Normal(mean, log_std.exp()).log_prob(raw).sum(-1)
+    assert (expected - gaussian_only).abs().max() > 1.0  # the Jacobian term is not negligible here
+    assert log_prob.shape == (size,)
+    np.testing.assert_allclose(log_prob.detach().double(), expected, rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(action.detach().double(), squashed, atol=1e-6)
+    np.testing.assert_allclose(deterministic.detach().double(), torch.tanh(mean), atol=1e-6)
+    assert action.abs().max() <= 1.0 and deterministic.abs().max() <= 1.0
+    assert not torch.allclose(action, deterministic)  # the sample explores
+    # The sample is reparameterised: its log-probability carries gradients to the heads.
+    log_prob.sum().backward()
+    assert policy.log_std.weight.grad is not None and policy.log_std.weight.grad.abs().sum() > 0
+
+
+def test_an_asymmetric_critic_takes_poses_and_a_plain_one_refuses_them():
+    torch.manual_seed(0)
+    sizes = (ACTIONS, GOALS, PREVIOUS, (16,))
+    asymmetric = ContinuousQNetwork(*sizes, pose_size=POSE_SIZE, features=FEATURES)
+    plain = ContinuousQNetwork(*sizes, features=FEATURES)
+    inputs = (torch.randn(5, FEATURES), torch.eye(GOALS)[:1].repeat(5, 1), torch.zeros(5, PREVIOUS),
+              torch.zeros(5, ACTIONS))  # fmt: skip
+    poses = torch.randn(5, POSE_SIZE)
+    assert asymmetric(*inputs, poses).shape == (5,) and plain(*inputs).shape == (5,)
+    torch.nn.init.normal_(asymmetric.q.weight)  # away from the near-zero start, so the pose shows
+    assert not torch.allclose(asymmetric(*inputs, poses), asymmetric(*inputs, poses + 1.0))
+    with pytest.raises(ValueError, match="needs poses of size 3, got none"):
+        asymmetric(*inputs)
+    with pytest.raises(ValueError, match="takes no poses"):
+        plain(*inputs, poses)
+    with pytest.raises(ValueError, match="pose_size must be at least 0"):
+        ContinuousQNetwork(*sizes, pose_size=-1, features=FEATURES)

@@ -1,0 +1,125 @@
+"""The presets (agents/presets.py): the paper's settings, the released code's changes, "fast", overrides."""
+
+from __future__ import annotations
+
+import pytest
+
+from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK
+from tactile_braille.agents import preset_config
+from tactile_braille.agents.config import flatten
+from tactile_braille.agents.presets import preset_differences
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+PAPER_EPOCHS = {
+    "tactile_braille/DiscreteArrows-v0": 25,
+    "tactile_braille/DiscreteAlphabet-v0": 100,
+    "tactile_braille/ContinuousArrows-v0": 100,
+    "tactile_braille/ContinuousAlphabet-v0": 2000,
+}
+
+
+PAIRS = [
+    (task, algo)
+    for task in PAPER_EPOCHS
+    for algo in ALGOS
+    if ("Continuous" in task) == (ALGOS[algo][2] == "continuous")
+]
+
+
+@pytest.mark.parametrize(("task", "algo"), PAIRS)
+def test_paper_preset_values(task, algo):
+    config = preset_config("paper", task, algo)
+    assert (config.task, config.algo, config.preset) == (task, algo, "paper")
+    assert config.epochs == PAPER_EPOCHS[task]
+    assert config.updates_per_step == (1 if algo == "td3" else 2)
+    assert (config.steps_per_epoch, config.start_steps, config.update_every) == (250, 200, 1)
+    assert (config.evaluation.test_episodes, config.replay.capacity, config.replay.her) == (20, 100_000, True)
+    assert config.max_episode_steps == 25
+    assert isinstance(config.agent, ALGOS[algo][1])
+    assert config.agent.batch_size == 32
+    paper_agent = {
+        "dqn": {"gamma": 0.95, "learning_rate": 5e-4, "test_epsilon": 0.0, "hidden": (512,)},
+        "sac_discrete": {"gamma": 0.6, "learning_rate": 5e-4, "hidden": (512,), "shared_encoder": False},
+        "sac": {"gamma": 0.95, "target_entropy": -6.0, "hidden": (512,), "shared_encoder": False},
+        "td3": {"gamma": 0.95, "learning_rate": 5e-5, "policy_delay": 2, "hidden": (512,)},
+    }[algo]
+    for name, value in paper_agent.items():
+        assert getattr(config.agent, name) == value, name
+
+
+RELEASED = {
+    "dqn": {"agent.test_epsilon": (0.0, 0.05)},
+    "sac_discrete": {},
+    "sac": {"agent.hidden": ([512], [1024, 512]), "max_episode_steps": (25, 35)},
+    "td3": {"agent.learning_rate": (5e-5, 7.5e-5), "update_every": (1, 100)},
+}
+"""What the released code's configurations change from the paper's (dotted setting -> (paper, released))."""
+
+
+@pytest.mark.parametrize(("task", "algo"), PAIRS)
+def test_released_preset_differs_exactly_by_the_listed_settings(task, algo):
+    paper, released = (
+        flatten(preset_config("paper", task, algo)),
+        flatten(preset_config("released", task, algo)),
+    )
+    assert released.pop("preset") == "released" and paper.pop("preset") == "paper"
+    changed = {key for key in paper if paper[key] != released[key]}
+    assert changed == set(RELEASED[algo])
+    for key, (paper_value, released_value) in RELEASED[algo].items():
+        assert (paper[key], released[key]) == (paper_value, released_value), key
+    assert len(preset_differences("released", task, algo)) == len(RELEASED[algo])
+
+
+def test_released_preset_values():
+    td3 = preset_config("released", CONTINUOUS_TASK, "td3")
+    assert (td3.agent.learning_rate, td3.update_every) == (7.5e-5, 100)
+    sac = preset_config("released", CONTINUOUS_TASK, "sac")
+    assert (sac.agent.hidden, sac.max_episode_steps) == ((1024, 512), 35)
+    assert preset_config("released", DISCRETE_TASK, "dqn").agent.test_epsilon == 0.05
+    assert preset_differences("released", DISCRETE_TASK, "sac_discrete") == []
+
+
+def test_preset_errors_and_overrides():
+    with pytest.raises(ValueError, match="unknown preset"):
+        preset_config("sota", DISCRETE_TASK, "dqn")
+    with pytest.raises(ValueError, match="gama"):
+        preset_config("paper", DISCRETE_TASK, "dqn", agent={"gama": 0.9})
+    with pytest.raises(ValueError, match="unknown algorithm"):
+        preset_config("paper", DISCRETE_TASK, "ppo")
+    with pytest.raises(ValueError, match="unknown task"):
+        preset_config("paper", "tactile_braille/Piano-v0", "dqn")
+    import toys
+
+    toys.register()
+    with pytest.raises(ValueError, match="no preset for task"):
+        preset_config("paper", "toys/BitFlipPress-v0", "dqn")
+    config = preset_config(
+        "released", CONTINUOUS_TASK, "td3", epochs=3, agent={"gamma": 0.9}, evaluation={"test_episodes": 2}
+    )
+    assert (config.epochs, config.evaluation.test_episodes, config.agent.gamma) == (3, 2, 0.9)
+    assert (config.agent.learning_rate, config.update_every) == (7.5e-5, 100)  # the rest of the preset stays
+    assert config.agent.batch_size == 32
+
+
+def test_fast_changes_the_papers_settings():
+    from tactile_braille.agents.presets import preset_config
+
+    paper = preset_config("paper", "tactile_braille/DiscreteAlphabet-v0", "dqn")
+    fast = preset_config("fast", "tactile_braille/DiscreteAlphabet-v0", "dqn")
+    assert (paper.replay.relabel, paper.touch.enabled, paper.epochs) == ("paper", False, 100)
+    assert (fast.replay.relabel, fast.touch.enabled, fast.epochs) == ("all", True, 25)
+    assert fast.agent.hidden == (256, 256) and fast.agent.epsilon_decay_steps == 1000
+    assert (fast.touch.refit_every, fast.touch.refits) == (250, 16)
+    assert preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", "sac").epochs == 90
+
+
+def test_the_fast_preset_gives_its_continuous_alphabet_additions_to_that_task_only():
+    for algo in ("sac", "td3"):
+        config = preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", algo)
+        assert config.agent.critic_pose and config.touch.goal_positions and config.touch.inputs == "readout"
+    for preset, task in (("fast", CONTINUOUS_TASK), ("paper", "tactile_braille/ContinuousAlphabet-v0")):
+        config = preset_config(preset, task, "sac")
+        assert not config.agent.critic_pose and not config.touch.goal_positions
+        assert config.touch.inputs == "features"

@@ -1,0 +1,43 @@
+"""Observations and frames made by hand, shared by the replay buffer's and the touch encoder's tests.
+
+Imported by name: pytest puts tests/ on sys.path (tests/conftest.py lives there).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+GOALS = 4
+PREVIOUS = 5
+FEATURES = 6
+
+
+def replay_observation(observation: np.ndarray, goal: int, achieved: int | None = None) -> dict:
+    one_hot = np.eye(GOALS, dtype=np.float32)
+    return {
+        "observation": observation,
+        "previous_action": np.zeros(PREVIOUS, dtype=np.float32),
+        "desired_goal": one_hot[goal],
+        "achieved_goal": one_hot[achieved] if achieved is not None else np.zeros(GOALS, np.float32),
+    }
+
+
+class Frames:
+    """Distinct observations in order (random binary images, or random feature vectors), kept in ``given``."""
+
+    def __init__(self, features: bool = False, seed: int = 0) -> None:
+        self.features, self.rng = features, np.random.default_rng(seed)
+        self.given: list[np.ndarray] = []
+
+    def __call__(self) -> np.ndarray:
+        if self.features:
+            frame = self.rng.normal(size=FEATURES).astype(np.float32)
+        else:
+            frame = ((self.rng.random((100, 100, 1)) < 0.3) * 255).astype(np.uint8)
+        self.given.append(frame)
+        return frame
+
+
+def as_images(frames: list[np.ndarray]) -> np.ndarray:
+    """(100, 100, 1) images as a (N, 1, 100, 100) batch."""
+    return np.moveaxis(np.stack(frames), -1, 1)
