@@ -351,12 +351,12 @@ def test_bf16_autocast_stays_close_to_fp32(algo, tasks):
 
 # ---------------------------------------------------------------- SAC's temperature
 @pytest.mark.parametrize("algo", ["sac", "sac_discrete"])
-def test_initial_temperature_is_a_hyperparameter(algo):
+def test_initial_temperature_is_a_hyperparameter(algo, env_datasets):
     from tactile_braille.agents.presets import preset_config
     from tactile_braille.agents.training import AGENTS
 
     task = "tactile_braille/ContinuousArrows-v0" if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
-    env = gym.make(task)
+    env = gym.make(task, dataset=env_datasets[task])
     algorithm = AGENTS[algo]
     agent = algorithm.agent(env.observation_space, env.action_space, algorithm.config(initial_alpha=0.05))
     assert float(agent.log_alpha.detach().exp()) == pytest.approx(0.05)

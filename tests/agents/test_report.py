@@ -22,6 +22,7 @@ def test_report_evaluates_the_checkpoint_and_draws_the_curve(env_datasets, tmp_p
     from tactile_braille.cli import main
 
     config = TrainConfig(
+        agent={"batch_size": 8, "hidden": (16,)},  # a small agent: the test is of the loop, not of learning
         epochs=2,
         steps_per_epoch=40,
         start_steps=20,

@@ -125,7 +125,7 @@ def test_td3_training_bursts_checkpoints_and_resumes(env_datasets, tmp_path, rec
         update_every=5,
         threads=1,
         dataset=str(env_datasets[CONTINUOUS_TASK]),
-        agent=TD3Config(hidden=(64,)),
+        agent=TD3Config(hidden=(16,), batch_size=8),
         evaluation={"test_episodes": 1},
         replay={"capacity": 500},
     )
@@ -222,6 +222,7 @@ def test_resume_after_kill_completes_every_epoch_once(env_datasets, tmp_path):
     script = (
         "from tactile_braille.agents import TrainConfig, train\n"
         f"config = TrainConfig(epochs=4, steps_per_epoch=60, start_steps=30, updates_per_step=1, "
+        "agent={'batch_size': 8, 'hidden': (16,)}, "
         f"evaluation={{'test_episodes': 2}}, replay={{'capacity': 2000}}, dataset={dataset!r}, threads=1)\n"
         f"train(config, run_dir={str(run_dir)!r}, progress=False)\n"
     )
@@ -256,6 +257,7 @@ def test_discrete_sac_trains_checkpoints_and_resumes(env_datasets, tmp_path):
     """A short discrete-SAC run: finite losses logged, a checkpoint that resumes to more epochs."""
     dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
     config = TrainConfig(
+        agent={"batch_size": 8, "hidden": (16,)},  # a small agent: the test is of the loop, not of learning
         algo="sac_discrete",
         epochs=1,
         steps_per_epoch=60,
@@ -320,6 +322,7 @@ def test_a_run_records_its_world_and_resumes_only_in_it(env_datasets, tmp_path):
 
     dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
     config = TrainConfig(
+        agent={"batch_size": 8, "hidden": (16,)},  # a small agent: the test is of the loop, not of learning
         epochs=1,
         steps_per_epoch=40,
         start_steps=20,

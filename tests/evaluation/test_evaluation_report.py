@@ -88,6 +88,10 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     runs = []
     for seed in (0, 1):
         config = TrainConfig(
+            agent={
+                "batch_size": 8,
+                "hidden": (16,),
+            },  # a small agent: the test is of the loop, not of learning
             seed=seed,
             epochs=3,
             steps_per_epoch=30,

@@ -13,6 +13,7 @@ import copy
 import csv
 import dataclasses
 import importlib.util
+import json
 import math
 import time
 
@@ -522,6 +523,7 @@ def test_training_on_the_ur5_rig_checkpoints_survives_a_fault_and_resumes(tmp_pa
     """DQN + HER on DiscreteArrows with backend="rig": a fault mid-run, then a resume to the end."""
     world = SimulatedUR5(simulated_config(tap_log=str(tmp_path / "taps.csv")))
     config = TrainConfig(
+        agent={"batch_size": 8, "hidden": (16,)},  # a small agent: the test is of the loop, not of learning
         task="tactile_braille/DiscreteArrows-v0",
         backend="rig",
         epochs=2,
@@ -583,8 +585,9 @@ def test_collect_and_train_commands_run_on_the_ur5_code_path(tmp_path, capsys):
     assert main(["collect", "--rig", "ur5", "--keys", "arrows", "--output", str(tmp_path / "x.h5")]) == 2
     assert "--rig-config rig.json" in capsys.readouterr().err  # a real robot needs its settings
     run = tmp_path / "run"
-    assert main(["train", "DiscreteArrows-v0", "dqn", "--backend", "rig", "--simulated-rig", "--epochs", "1",
+    assert main(["train", "DiscreteArrows-v0", "dqn", "--simulated-rig", "--epochs", "1",  # implies the rig
                  "--test-episodes", "1", "--updates-per-step", "1", "--threads", "1", "--run-dir", str(run),
-                 "--quiet"]) == 0  # fmt: skip
+                 "--agent.batch-size", "8", "--agent.hidden", "16", "--quiet"]) == 0  # fmt: skip
     rows = read_progress(run)
     assert [int(r["epoch"]) for r in rows] == [0] and rows[0]["env_steps"] == 250
+    assert json.loads((run / "config.json").read_text())["backend"] == "rig"

@@ -65,6 +65,25 @@ def test_saved_model_reloads_with_identical_predictions(trained, arrow_datasets,
     np.testing.assert_array_equal(predict(model, images, KEYS), predict(trained.model, images, KEYS))
 
 
+def test_evaluate_classifier_scores_and_writes_the_classifier(trained, arrow_datasets, tmp_path):
+    import json
+
+    from tactile_braille.supervised.report import evaluate_classifier
+
+    train, validation = arrow_datasets
+    scored = evaluate_classifier(trained, validation, tmp_path / "run", train_path=train.path)
+    assert scored.images == len(select_classes(validation, KEYS)[1]) == 80
+    assert scored.matrix.sum() == 80 and np.trace(scored.matrix) == round(scored.accuracy * 80)
+    assert scored.accuracy == pytest.approx(trained.history[trained.best_epoch]["val_accuracy"], abs=1e-6)
+    metrics = json.loads((tmp_path / "run" / "classifier.json").read_text())["metrics"]
+    assert metrics["val_accuracy"] == scored.accuracy and metrics["validation"] == str(validation.path)
+    assert metrics["top_confusions"] == scored.mistakes
+    assert (tmp_path / "run" / "confusion.png").stat().st_size > 1000
+    model, _ = load_classifier(tmp_path / "run")
+    images, _ = select_classes(validation, KEYS)
+    np.testing.assert_array_equal(predict(model, images, KEYS), predict(trained.model, images, KEYS))
+
+
 def test_load_from_a_folder_without_a_model_raises(tmp_path):
     with pytest.raises(ValueError, match="does not hold a saved classifier"):
         load_classifier(tmp_path)
