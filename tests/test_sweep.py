@@ -15,6 +15,7 @@ TINY = {
     "updates_per_step": 1,
     "evaluation": {"test_episodes": 1},
     "replay": {"capacity": 500},
+    "agent": {"batch_size": 8, "hidden": (16,)},
 }
 
 

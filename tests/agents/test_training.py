@@ -176,7 +176,7 @@ def test_sac_bf16_training_logs_finite_losses(env_datasets, tmp_path, recording)
         threads=1,
         precision="bf16",
         dataset=str(env_datasets[CONTINUOUS_TASK]),
-        agent=SACConfig(hidden=(64,)),
+        agent=SACConfig(hidden=(64,), batch_size=8),
         evaluation={"test_episodes": 1},
         replay={"capacity": 500},
     )
