@@ -839,3 +839,13 @@ def test_a_run_with_every_addition_resumes_on_its_readout(env_datasets, tmp_path
     after = agent.state_dict()
     assert not torch.equal(before["critics"]["0.q.weight"], after["critics"]["0.q.weight"])  # it learnt on
     assert agent.inputs == "readout" and agent.key_positions_mm is not None and agent.agent.config.critic_pose
+
+
+def test_a_rig_handed_to_a_run_on_the_dataset_is_refused_before_the_folder_is_written(env_datasets, tmp_path):
+    """The trap of old: a robot connected, then ignored while the run trained on the dataset."""
+    from tactile_braille.rigs.virtual import VirtualRig
+
+    config = TrainConfig(dataset=str(env_datasets["tactile_braille/DiscreteArrows-v0"]), threads=1)
+    with pytest.raises(ValueError, match="backend is 'dataset': set backend='rig'"):
+        train(config, run_dir=tmp_path / "run", progress=False, rig=VirtualRig())
+    assert not (tmp_path / "run").exists()

@@ -414,6 +414,11 @@ class TrainConfig:
         """A copy with settings changed (groups as dicts of their settings): :func:`replace_settings`."""
         return replace_settings(self, changes)
 
+    def check_rig(self, rig) -> None:
+        """Refuse a robot handed to a run that does not train on it (its backend is not ``rig``)."""
+        if rig is not None and self.backend != "rig":
+            raise ValueError(f"a rig was given, but the run's backend is {self.backend!r}: set backend='rig'")
+
     @property
     def continuous(self) -> bool:
         """Whether the algorithm acts in a continuous action space."""

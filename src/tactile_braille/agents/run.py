@@ -49,14 +49,18 @@ class Counters:
 
 
 def open_run(
-    config: TrainConfig | None, run_dir: str | Path | None, resume: bool
+    config: TrainConfig | None, run_dir: str | Path | None, resume: bool, rig=None
 ) -> tuple[TrainConfig, Path]:
-    """The run's settings and folder: read back for a resume, else written to a new folder."""
+    """The run's settings and folder: read back for a resume, else written to a new folder (after the
+    settings are checked against the ``rig`` handed in, if any)."""
     if resume:
         if run_dir is None:
             raise ValueError("resume needs the run folder")
-        return read_config(run_dir), Path(run_dir)
+        config = read_config(run_dir)
+        config.check_rig(rig)
+        return config, Path(run_dir)
     config = config or TrainConfig()
+    config.check_rig(rig)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     run_dir = Path(run_dir or f"runs/{task_name(config.task)}__{config.algo}__{config.seed}__{stamp}")
     if (run_dir / CONFIG_FILE).exists():

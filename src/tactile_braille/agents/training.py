@@ -66,7 +66,7 @@ def train(
     rig=None,
 ) -> Path:
     """Train (or, with ``resume``, continue) a run; returns its folder. ``rig``: see :func:`make_env`."""
-    config, run_dir = open_run(config, run_dir, resume)
+    config, run_dir = open_run(config, run_dir, resume, rig)
     torch.set_num_threads(config.threads)
     env, test_env = make_env(config, rig), make_env(config, rig)
     record_world(run_dir, env, resume)
@@ -171,8 +171,7 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
     handed in, not configured, so a run folder never names one. ``kwargs`` go to ``gym.make``
     (``render_mode`` for figures).
     """
-    if rig is not None and config.backend != "rig":
-        raise ValueError(f"a rig was given, but the run's backend is {config.backend!r}: set backend='rig'")
+    config.check_rig(rig)
     if task_of(config.task) is not None:
         kwargs["backend"] = config.backend
         if config.dataset is not None:
