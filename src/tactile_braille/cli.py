@@ -269,9 +269,9 @@ def _classify(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
+    config = None if args.resume is not None else _train_config(args)  # checked before torch loads
     from tactile_braille.agents.training import train
 
-    config = None if args.resume is not None else _train_config(args)
     rig = None
     if args.rig_config is not None or args.simulated_rig:
         rig, _ = _open_ur5(args.rig_config, simulated=args.simulated_rig)
