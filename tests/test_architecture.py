@@ -79,3 +79,25 @@ def test_no_function_is_longer_than_80_lines():
         if length > LONGEST_FUNCTION_LINES
     ]
     assert not long, long
+
+
+def test_every_import_of_the_package_resolves():
+    """Imports inside functions run only when their branch does (a Ray trial, a robot): check them all."""
+    import importlib
+
+    missing = []
+    for path in _modules():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (
+                isinstance(node, ast.ImportFrom)
+                and node.level == 0
+                and (node.module or "").startswith("tactile_braille")
+            ):
+                module = importlib.import_module(node.module)
+                missing += [
+                    f"{path.relative_to(PACKAGE)}: {node.module}.{alias.name}"
+                    for alias in node.names
+                    if not hasattr(module, alias.name)
+                    and importlib.util.find_spec(f"{node.module}.{alias.name}") is None
+                ]
+    assert not missing, missing

@@ -158,7 +158,7 @@ def _sweep_on_ray(trials, root: Path, address, cpus_per_trial: float, max_failur
         trial = Trial(**fields)
         torch.set_num_threads(fields["overrides"]["threads"])
         run_dir = run_trial(trial, space["root"])
-        from tactile_braille.agents.training import read_progress
+        from tactile_braille.agents.run import read_progress
 
         rows = read_progress(run_dir)
         tune.report({"test_return": rows[-1]["test/episodic_return"], "epochs": len(rows)})
