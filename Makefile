@@ -31,8 +31,10 @@ run: $(STAMP)
 	else $(TB) train DiscreteArrows-v0 dqn --epochs 6 --precision bf16 --test-episodes 10 --run-dir $(DQN_RUN); fi
 	$(TB) report $(DQN_RUN) --episodes 50
 
+# Two workers (one per core here); each test file runs whole in one worker, in its own order.
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" -n $(TEST_WORKERS) --dist loadfile
 
 # The slow tests include a sweep on a local Ray: the optional `sweep` extra.
 test-slow: $(STAMP)
