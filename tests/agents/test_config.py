@@ -161,3 +161,37 @@ def test_a_run_from_before_these_settings_compares_with_their_defaults(env_datas
         "touch.goal_positions: False -> True",
         "touch.inputs: 'features' -> 'readout'",
     ]
+
+
+def test_a_flat_config_json_from_before_the_groups_reads_into_them():
+    flat = {
+        "task": "tactile_braille/DiscreteArrows-v0", "algo": "dqn", "epochs": 7, "replay_capacity": 500,
+        "her": False, "relabel": "all", "touch_encoder": True, "touch_epochs": 3, "touch_inputs": "readout",
+        "goal_positions": True, "touch_refits": 2, "touch_refit_every": 50, "test_episodes": 4,
+        "snapshots": 1, "agent": {"hidden": [16], "batch_size": 8},
+    }  # fmt: skip
+    config = TrainConfig.from_json(flat)
+    assert (config.epochs, config.agent.hidden, config.agent.batch_size) == (7, (16,), 8)
+    assert (config.replay.capacity, config.replay.her, config.replay.relabel) == (500, False, "all")
+    assert (config.touch.enabled, config.touch.epochs, config.touch.inputs) == (True, 3, "readout")
+    assert (config.touch.goal_positions, config.touch.refits, config.touch.refit_every) == (True, 2, 50)
+    assert (config.evaluation.test_episodes, config.evaluation.snapshots) == (4, 1)
+    assert TrainConfig.from_json(json.loads(json.dumps(config.to_json()))) == config
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (
+            {"task": "tactile_braille/DiscreteArrows-v0", "algo": "dqn", "epoch": 3},
+            r"no settings \['epoch'\]",
+        ),
+        ({"algo": "dqn", "replay": {"size": 3}}, r"ReplayConfig has no settings \['size'\] \(replay"),
+        ({"algo": "dqn", "agent": {"critic_pose": True}}, r"DQNConfig has no settings \['critic_pose'\]"),
+        ({"task": "tactile_braille/DiscreteArrows-v0"}, "name no algorithm"),
+        ({"algo": "ppo"}, "unknown algorithm 'ppo'"),
+    ],
+)
+def test_a_config_json_with_unknown_or_missing_settings_is_refused(data, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig.from_json(data)

@@ -419,11 +419,6 @@ class TrainConfig:
         if rig is not None and self.backend != "rig":
             raise ValueError(f"a rig was given, but the run's backend is {self.backend!r}: set backend='rig'")
 
-    @property
-    def continuous(self) -> bool:
-        """Whether the algorithm acts in a continuous action space."""
-        return self.algo in CONTINUOUS_ALGORITHMS
-
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
 
@@ -432,16 +427,10 @@ class TrainConfig:
         """A config from :meth:`to_json`'s dict, or from the flat config.json of runs written before
         the settings were grouped (their settings move to their groups)."""
         data = _ungroup_legacy(dict(data))
-        unknown = set(data) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ValueError(f"unknown settings {sorted(unknown)}")
-        if "algo" not in data or data["algo"] not in AGENT_CONFIGS:
-            raise ValueError(f"unknown algorithm {data.get('algo')!r}; choose one of {ALGORITHMS}")
-        groups = {"agent": AGENT_CONFIGS[data["algo"]], **GROUPS}
-        for name, group in groups.items():
-            if name in data:
-                data[name] = _from_dict(group, data[name], name)
-        return cls(**data)
+        if "algo" not in data:
+            raise ValueError("the settings name no algorithm ('algo')")
+        _refuse_unknown(cls, data)
+        return cls(**data)  # the groups, given as dicts, become their dataclasses
 
 
 GROUPS: dict[str, type] = {"replay": ReplayConfig, "touch": TouchConfig, "evaluation": EvaluationConfig}
@@ -477,11 +466,17 @@ def _from_dict(cls: type, values: Any, where: str):
         return values
     if not isinstance(values, dict):
         raise ValueError(f"{where} must be a mapping of settings, got {values!r}")
-    known = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(values) - known
-    if unknown:
-        raise ValueError(f"{cls.__name__} has no settings {sorted(unknown)} ({where}.*)")
+    _refuse_unknown(cls, values, where)
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+
+def _refuse_unknown(cls: type, names, where: str | None = None) -> None:
+    """Refuse settings ``cls`` does not have, naming them (and the group they were given for)."""
+    unknown = set(names) - {f.name for f in dataclasses.fields(cls)}
+    if unknown:
+        raise ValueError(
+            f"{cls.__name__} has no settings {sorted(unknown)}" + (f" ({where}.*)" if where else "")
+        )
 
 
 def replace_settings(config: TrainConfig, changes: dict[str, Any]) -> TrainConfig:
@@ -489,19 +484,13 @@ def replace_settings(config: TrainConfig, changes: dict[str, Any]) -> TrainConfi
     (``{"agent": {"hidden": (256,)}, "touch": {"enabled": True}, "epochs": 3}``). Changing ``algo``
     starts the agent from that algorithm's defaults."""
     changes = dict(changes)
-    fields = {f.name for f in dataclasses.fields(TrainConfig)}
-    unknown = set(changes) - fields
-    if unknown:
-        raise ValueError(f"TrainConfig has no settings {sorted(unknown)}")
+    _refuse_unknown(TrainConfig, changes)
     algo = changes.get("algo", config.algo)
     groups = {"agent": AGENT_CONFIGS.get(algo, type(config.agent)), **GROUPS}
     for name, group in groups.items():
         if isinstance(changes.get(name), dict):
             base = getattr(config, name) if (name != "agent" or algo == config.algo) else group()
-            known = {f.name for f in dataclasses.fields(group)}
-            unknown = set(changes[name]) - known
-            if unknown:
-                raise ValueError(f"{group.__name__} has no settings {sorted(unknown)} ({name}.*)")
+            _refuse_unknown(group, changes[name], name)
             changes[name] = dataclasses.replace(base, **changes[name])
     if algo != config.algo and "agent" not in changes:
         changes["agent"] = None
