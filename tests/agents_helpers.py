@@ -71,6 +71,7 @@ def touch_config(env_datasets, algo: str = "dqn", **changes) -> TrainConfig:
         "evaluation": {"test_episodes": 1, "snapshots": 1},
         "replay": {"capacity": 200},
         "touch": {"enabled": True, "epochs": 2},
+        "track": "proprio",
     }
     groups = {name: {**settings[name], **changes.pop(name)} for name in ("evaluation", "replay", "touch")
               if isinstance(changes.get(name), dict)}  # fmt: skip

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tactile_braille.agents import TrainConfig, train
+from tactile_braille.agents.presets import preset_config
 from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
@@ -57,9 +58,9 @@ def test_results_table_has_the_papers_shape_and_numbers():
     assert list(groups) == [("DiscreteArrows-v0", "dqn", ""), ("DiscreteArrows-v0", "sac_discrete", ""),
                             ("DiscreteAlphabet-v0", "dqn", "")]  # fmt: skip
     table = results_table(groups).splitlines()
-    assert table[0].count("|") == 12
+    assert table[0].count("|") == 13
     arrows_dqn = table[2]
-    assert "| disc arrow | DQN | 2 | 245 [240, 250] | 1.000 [1.000, 1.000] |" in arrows_dqn
+    assert "| disc arrow | DQN | tactile | 2 | 245 [240, 250] | 1.000 [1.000, 1.000] |" in arrows_dqn
     assert "2.5 [2.0, 3.0]" in arrows_dqn  # convergence epochs 2 and 3 (95 % of 1.0; counted from 1)
     assert arrows_dqn.endswith("| 230 | 1.000 | 8 |")  # the paper's Table III
     assert "0/1 reached" in table[3]  # discrete SAC never reached 0.95
@@ -67,6 +68,19 @@ def test_results_table_has_the_papers_shape_and_numbers():
     with pytest.raises(ValueError, match="repeats seed 0"):
         group([*records, record("DiscreteArrows-v0", "dqn", 0, [0.5])])
     assert table[4].endswith("| 1722 | 0.981 | 45 |")
+
+
+def test_runs_of_two_tracks_are_tabled_apart_under_their_tracks():
+    paper = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn")
+    fast = preset_config("fast", "tactile_braille/DiscreteArrows-v0", "dqn")
+    records = [record("DiscreteArrows-v0", "dqn", seed, [0.5, 1.0], 1.0, 240) for seed in (0, 1)]
+    records[0].config, records[1].config = paper, fast
+    text = results_table(group(records))
+    tactile, proprio = text.split("### ")[1:]
+    assert tactile.startswith("Track `tactile`") and proprio.startswith("Track `proprio`")
+    assert "| DQN (paper, fp32) | tactile |" in tactile
+    assert "proprio" not in tactile.split("\n", 1)[1]  # nothing but the heading names the other track
+    assert "| DQN (fast, fp32) | proprio |" in proprio
 
 
 def test_original_curves_are_vendored():
@@ -113,14 +127,14 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     )
     report = write_report(runs, tmp_path / "report", title="Two seeds")
     assert sorted(p.name for p in (tmp_path / "report").iterdir()) == [
-        "confusion_DiscreteArrows__dqn__custom_fp32.png", "confusion_not_ours.png", "curves.png", "notes.txt",
-        "results.md", "trajectories_DiscreteArrows__dqn__custom_fp32.png",
+        "confusion_DiscreteArrows__dqn__custom_fp32_tactile-track.png", "confusion_not_ours.png", "curves.png",
+        "notes.txt", "results.md", "trajectories_DiscreteArrows__dqn__custom_fp32_tactile-track.png",
     ]  # fmt: skip
     text = report.read_text()
     assert text.startswith("# Two seeds")
-    assert "| sim | disc arrow | DQN (custom, fp32) | 2 |" in text
-    for name in ("curves.png", "confusion_DiscreteArrows__dqn__custom_fp32.png",
-                 "trajectories_DiscreteArrows__dqn__custom_fp32.png"):  # fmt: skip
+    assert "| sim | disc arrow | DQN (custom, fp32, tactile track) | tactile | 2 |" in text
+    for name in ("curves.png", "confusion_DiscreteArrows__dqn__custom_fp32_tactile-track.png",
+                 "trajectories_DiscreteArrows__dqn__custom_fp32_tactile-track.png"):  # fmt: skip
         assert (tmp_path / "report" / name).read_bytes()[:4] == b"\x89PNG", name
         assert f"]({name})" in text
     typing = json.loads((runs[0] / "typing.json").read_text())  # evaluated on the way
@@ -142,7 +156,7 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     assert (tmp_path / "docs" / "results" / "curves.png").read_bytes()[:4] == b"\x89PNG"
     assert (
         "](results/curves.png)" in text
-        and "](results/confusion_DiscreteArrows__dqn__custom_fp32.png)" in text
+        and "](results/confusion_DiscreteArrows__dqn__custom_fp32_tactile-track.png)" in text
     )
     assert "`make it`" in text
     assert (

@@ -38,11 +38,16 @@ Backend = Literal["dataset", "render", "rig"]
 Precision = Literal["fp32", "bf16"]
 RelabelRule = Literal["paper", "all"]
 TouchInputs = Literal["features", "readout"]
+Track = Literal["tactile", "proprio"]
 
 PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
 RELABELLING: tuple[str, ...] = typing.get_args(RelabelRule)
 TOUCH_INPUTS: tuple[str, ...] = typing.get_args(TouchInputs)
 BACKENDS: tuple[str, ...] = typing.get_args(Backend)
+TRACKS: tuple[str, ...] = typing.get_args(Track)
+"""The benchmark's tracks (docs/benchmark.md). ``tactile``: the paper's rules, the agent and every loss
+see only the observation dictionary and the reward. ``proprio``: also what a calibrated robot knows, the
+arm's pose at each tap and the calibrated key layout."""
 
 
 def _check_hyperparameters(config) -> None:
@@ -327,6 +332,9 @@ class TrainConfig:
         precision: ``fp32`` or ``bf16`` (autocast in the updates).
         threads: torch CPU threads.
         checkpoint_every: epochs between checkpoints.
+        track: the benchmark track the run competes in (docs/benchmark.md): ``tactile`` (the paper's
+            rules: only the observation dictionary and the reward) or ``proprio`` (also the arm's pose
+            and the calibrated key layout). A setting outside the track is refused.
         preset: name of the preset the settings came from (a record only).
         agent: the algorithm's hyperparameters (default: the paper's for ``algo``).
         replay: the replay buffer.
@@ -349,6 +357,7 @@ class TrainConfig:
     precision: Precision = "fp32"
     threads: int = 2
     checkpoint_every: int = 1
+    track: Track = "tactile"
     preset: str | None = None
     agent: AgentConfig | None = None
     replay: ReplayConfig = field(default_factory=ReplayConfig)
@@ -375,6 +384,16 @@ class TrainConfig:
         self._check_task()
         self._check_device()
         self._check_touch()
+        self._check_track()
+
+    def _check_track(self) -> None:
+        outside = proprio_settings(self) if self.track == "tactile" else {}
+        if outside:
+            uses = "; ".join(f"{name} {why}" for name, why in outside.items())
+            raise ValueError(
+                f"the tactile track allows only the observation dictionary and the reward, but {uses}: "
+                "set track='proprio' (--track proprio) or turn them off"
+            )
 
     def _check_task(self) -> None:
         from tactile_braille.envs.registry import task_of  # the environments' registry, not torch
@@ -430,7 +449,27 @@ class TrainConfig:
         if "algo" not in data:
             raise ValueError("the settings name no algorithm ('algo')")
         _refuse_unknown(cls, data)
+        if "track" not in data:  # written before tracks: the track its settings need
+            config = cls(**{**data, "track": "proprio"})
+            return replace_settings(config, {"track": "proprio" if proprio_settings(config) else "tactile"})
         return cls(**data)  # the groups, given as dicts, become their dataclasses
+
+
+def proprio_settings(config: TrainConfig) -> dict[str, str]:
+    """The settings of ``config`` that use what only a calibrated robot knows (the ``proprio`` track),
+    each with what it uses."""
+    uses = {
+        "touch.enabled": "labels every frame with the arm's pose and the keys the calibrated layout "
+        "places there",
+        "touch.goal_positions": "places the goal on the calibrated key layout",
+        "agent.critic_pose": "shows the critics the arm's pose",
+    }
+    active = {
+        "touch.enabled": config.touch.enabled,
+        "touch.goal_positions": config.touch.goal_positions,
+        "agent.critic_pose": getattr(config.agent, "critic_pose", False),
+    }
+    return {name: why for name, why in uses.items() if active[name]}
 
 
 GROUPS: dict[str, type] = {"replay": ReplayConfig, "touch": TouchConfig, "evaluation": EvaluationConfig}

@@ -17,9 +17,15 @@ once in :mod:`~tactile_braille.agents.config`):
   sensor pose, goals placed on the calibrated layout, and learning on the
   encoder's readout (:func:`fast_changes`).
 
+Each preset declares its track (:data:`PRESET_TRACKS`, docs/benchmark.md):
+``paper`` and ``released`` are ``tactile``, ``fast`` (whose encoder learns from
+the arm's pose and the key layout) is ``proprio``.
+
 >>> config = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn")
 >>> config.epochs, config.updates_per_step, config.agent.gamma
 (25, 2, 0.95)
+>>> preset_config("fast", "tactile_braille/DiscreteArrows-v0", "dqn").track
+'proprio'
 >>> preset_differences("released", "tactile_braille/ContinuousArrows-v0", "sac")
 ['agent.hidden: [512] -> [1024, 512]', 'max_episode_steps: 25 -> 35']
 """
@@ -32,6 +38,9 @@ from tactile_braille.agents.config import AGENT_CONFIGS, TrainConfig, difference
 from tactile_braille.envs.registry import task_of
 
 PRESETS = ("paper", "released", "fast")
+PRESET_TRACKS = {"paper": "tactile", "released": "tactile", "fast": "proprio"}
+"""The track each preset competes in (docs/benchmark.md): the paper's agents learn from touch alone;
+``fast`` also from the arm's pose and the calibrated key layout."""
 
 PAPER_EPOCHS = {
     ("discrete", "arrows"): 25,
@@ -106,7 +115,7 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
     if algo not in AGENT_CONFIGS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {tuple(AGENT_CONFIGS)}")
     config = TrainConfig(task=task, algo=algo, preset=name, epochs=PAPER_EPOCHS[family(task)],
-                         max_episode_steps=25)  # fmt: skip
+                         max_episode_steps=25, track=PRESET_TRACKS[name])  # fmt: skip
     if name == "released":
         config = replace_settings(config, RELEASED_CHANGES[algo])
     if name == "fast":
@@ -117,5 +126,5 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
 def preset_differences(name: str, task: str, algo: str) -> list[str]:
     """``setting: paper -> preset`` for each setting in which preset ``name`` departs from the paper's."""
     return differences(
-        preset_config("paper", task, algo), preset_config(name, task, algo), ignore=("preset",)
+        preset_config("paper", task, algo), preset_config(name, task, algo), ignore=("preset", "track")
     )

@@ -98,7 +98,11 @@ class RunRecord:
         """The settings that set this run apart from others of its task and algorithm."""
         if self.config is None:
             return ""
+        from tactile_braille.agents.presets import PRESETS
+
         parts = [self.config.preset or "custom", self.config.precision]
+        if self.config.preset not in PRESETS:  # a preset's run names its track by departing from it
+            parts.append(f"{self.config.track} track")
         if not self.config.replay.her:
             parts.append("no HER")
         if self.config.backend != "dataset":
@@ -106,6 +110,11 @@ class RunRecord:
         if self.world != GENERATOR_VERSION:
             parts.append("earlier world" if self.world is None else f"world {self.world}")
         return ", ".join(parts + _departures(self.config))
+
+    @property
+    def track(self) -> str:
+        """The benchmark track the run competes in (docs/benchmark.md)."""
+        return self.config.track if self.config is not None else "tactile"
 
     @property
     def convergence(self) -> int | None:
@@ -201,12 +210,33 @@ def _label(algo: str, variant: str) -> str:
     return ALGO_NAMES.get(algo, algo) + (f" ({variant})" if variant else "")
 
 
+TRACK_TITLES = {
+    "tactile": "Track `tactile`: the paper's rules (touch, previous action, goals and reward only)",
+    "proprio": "Track `proprio`: also the arm's pose and the calibrated key layout",
+}
+"""A heading per track where a report holds more than one (docs/benchmark.md)."""
+
+
 def results_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
-    """Markdown in the shape of the paper's Table III, ours (mean [95 % CI]) beside the paper's."""
+    """Markdown in the shape of the paper's Table III, ours (mean [95 % CI]) beside the paper's, with a
+    ``track`` column; runs of different tracks go in separate tables, each under its track's heading."""
+    tracks: dict[str, dict] = {}
+    for key, records in groups.items():
+        kinds = {r.track for r in records}
+        if len(kinds) > 1:
+            raise ValueError(f"{records[0].path} and others of one group compete in tracks {sorted(kinds)}")
+        tracks.setdefault(records[0].track, {})[key] = records
+    if len(tracks) == 1:
+        return _track_table(next(iter(tracks.values())))
+    ordered = sorted(tracks, key=lambda t: (list(TRACK_TITLES).index(t) if t in TRACK_TITLES else 99, t))
+    return "\n\n".join(f"### {TRACK_TITLES.get(t, t)}\n\n" + _track_table(tracks[t]) for t in ordered)
+
+
+def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     lines = [
-        "| env | task | algo | seeds | steps | accuracy | convergence epoch | first epoch >= 0.95 "
+        "| env | task | algo | track | seeds | steps | accuracy | convergence epoch | first epoch >= 0.95 "
         "| paper: steps | paper: accuracy | paper: convergence |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (task, algo, variant), records in groups.items():
         typed = [r.typing for r in records if r.typing]
@@ -221,8 +251,9 @@ def results_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
         paper = PAPER_TABLE.get(("sim", task, algo))
         paper_cells = [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
         lines.append(
-            f"| sim | {TASK_NAMES.get(task, task)} | {_label(algo, variant)} | {len(records)} | {steps} "
-            f"| {accuracy} | {convergence} | {reached_text} | " + " | ".join(paper_cells) + " |"
+            f"| sim | {TASK_NAMES.get(task, task)} | {_label(algo, variant)} | {records[0].track} "
+            f"| {len(records)} | {steps} | {accuracy} | {convergence} | {reached_text} | "
+            + " | ".join(paper_cells) + " |"
         )
     return "\n".join(lines)
 
