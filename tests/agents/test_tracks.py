@@ -1,0 +1,115 @@
+"""The benchmark's two tracks (docs/benchmark.md): each preset declares its own, a run using anything
+outside its track is refused before anything is written, and a `tactile` run learns only from the
+observation dictionary and the reward: scrambling everything else the environment reports changes
+nothing in it, while a `proprio` run learns from it."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents_helpers import read_progress_csv, touch_config, train_module
+from tactile_braille.agents import TrainConfig, train
+from tactile_braille.agents.config import TRACKS, proprio_settings
+from tactile_braille.agents.presets import PRESET_TRACKS, PRESETS, preset_config
+from tactile_braille.cli import main
+from tactile_braille.sweep import PAPER_SIM_RUNS
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize(("task", "algo"), PAPER_SIM_RUNS)
+def test_every_preset_declares_its_track_and_keeps_to_it(preset, task, algo):
+    config = preset_config(preset, f"tactile_braille/{task}", algo)
+    assert config.track == PRESET_TRACKS[preset] in TRACKS
+    assert (config.track == "proprio") == bool(proprio_settings(config))  # fast uses what it declares
+
+
+@pytest.mark.parametrize(
+    ("changes", "named"),
+    [
+        ({"touch": {"enabled": True}}, "touch.enabled labels every frame with the arm's pose"),
+        ({"touch": {"enabled": True, "goal_positions": True}}, "touch.goal_positions places the goal"),
+        ({"touch": {"enabled": True}, "agent": {"critic_pose": True}}, "agent.critic_pose shows the critics"),
+    ],
+)
+def test_a_tactile_run_using_pose_or_layout_is_refused_with_what_it_used(changes, named):
+    paper = preset_config("paper", "tactile_braille/ContinuousAlphabet-v0", "sac")
+    with pytest.raises(ValueError, match="the tactile track allows only the observation") as error:
+        paper.with_changes(**changes)
+    assert named in str(error.value) and "--track proprio" in str(error.value)
+    assert paper.with_changes(track="proprio", **changes).track == "proprio"
+    with pytest.raises(ValueError, match="touch.enabled labels"):
+        preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", "sac", track="tactile")
+
+
+def test_the_command_line_refuses_an_out_of_track_run_before_writing_anything(tmp_path, capsys):
+    run = tmp_path / "run"
+    assert main(["train", "DiscreteArrows-v0", "dqn", "--touch.enabled", "--run-dir", str(run)]) == 2
+    assert "tactile track allows only" in capsys.readouterr().err
+    assert not run.exists()
+
+
+def test_a_config_json_from_before_tracks_reads_into_the_track_its_settings_need():
+    fast = preset_config("fast", "tactile_braille/DiscreteArrows-v0", "dqn").to_json()
+    paper = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn").to_json()
+    for stored in (fast, paper):
+        del stored["track"]
+    assert TrainConfig.from_json(fast).track == "proprio"
+    assert TrainConfig.from_json(paper).track == "tactile"
+    stored = {**preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn").to_json(), "track": "x"}
+    with pytest.raises(ValueError, match="track must be one of 'tactile', 'proprio'"):
+        TrainConfig.from_json(stored)
+
+
+class ScrambledReports(gym.Wrapper):
+    """Everything the environment reports besides the observation dictionary and the reward replaced
+    by noise: the arm's pose, the goal key's and the pressed key's names."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.noise = np.random.default_rng(12345)
+
+    def _scramble(self, info: dict) -> dict:
+        keys = self.env.unwrapped.goal_keys
+        return {
+            **info,
+            "sensor_pose_mm": self.noise.uniform(-50, 50, size=np.shape(info["sensor_pose_mm"])),
+            "goal_key": keys[int(self.noise.integers(len(keys)))],
+            "pressed_key": keys[int(self.noise.integers(len(keys)))] if info["pressed_key"] else None,
+        }
+
+    def reset(self, **kwargs):
+        observation, info = self.env.reset(**kwargs)
+        return observation, self._scramble(info)
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        return observation, reward, terminated, truncated, self._scramble(info)
+
+
+def _learnt(config: TrainConfig, run_dir, monkeypatch, scrambled: bool) -> list[dict]:
+    make_env = train_module.make_env
+    if scrambled:
+        monkeypatch.setattr(train_module, "make_env", lambda *a, **k: ScrambledReports(make_env(*a, **k)))
+    train(config, run_dir=run_dir, progress=False)
+    monkeypatch.setattr(train_module, "make_env", make_env)
+    return [{k: v for k, v in row.items() if k not in ("charts/SPS", "time_s")} for row in read_progress_csv(run_dir)]
+
+
+@pytest.mark.parametrize("algo", ["dqn", "sac"])
+def test_a_tactile_run_learns_identically_when_all_but_its_observations_and_rewards_are_scrambled(
+    env_datasets, tmp_path, monkeypatch, algo
+):
+    tactile = touch_config(env_datasets, algo, track="tactile", touch={"enabled": False}, epochs=2)
+    proprio = touch_config(env_datasets, algo, epochs=2)
+    assert (tactile.track, proprio.track) == ("tactile", "proprio")
+    for config, same in ((tactile, True), (proprio, False)):
+        plain = _learnt(config, tmp_path / f"{config.track}-plain", monkeypatch, scrambled=False)
+        scrambled = _learnt(config, tmp_path / f"{config.track}-scrambled", monkeypatch, scrambled=True)
+        assert (plain == scrambled) is same, config.track
+    assert json.loads((tmp_path / "tactile-plain" / "config.json").read_text())["track"] == "tactile"
