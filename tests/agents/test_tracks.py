@@ -43,7 +43,7 @@ def test_a_tactile_run_using_pose_or_layout_is_refused_with_what_it_used(changes
         paper.with_changes(**changes)
     assert named in str(error.value) and "--track proprio" in str(error.value)
     assert paper.with_changes(track="proprio", **changes).track == "proprio"
-    with pytest.raises(ValueError, match="touch.enabled labels"):
+    with pytest.raises(ValueError, match=r"touch\.enabled labels"):
         preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", "sac", track="tactile")
 
 
@@ -98,7 +98,8 @@ def _learnt(config: TrainConfig, run_dir, monkeypatch, scrambled: bool) -> list[
         monkeypatch.setattr(train_module, "make_env", lambda *a, **k: ScrambledReports(make_env(*a, **k)))
     train(config, run_dir=run_dir, progress=False)
     monkeypatch.setattr(train_module, "make_env", make_env)
-    return [{k: v for k, v in row.items() if k not in ("charts/SPS", "time_s")} for row in read_progress_csv(run_dir)]
+    rows = read_progress_csv(run_dir)
+    return [{k: v for k, v in row.items() if k not in ("charts/SPS", "time_s")} for row in rows]
 
 
 @pytest.mark.parametrize("algo", ["dqn", "sac"])
