@@ -127,7 +127,10 @@ def test_goal_positions_need_a_touch_encoder_and_a_keyboard(env_datasets):
             touch={"inputs": "readout"},
         )
     with pytest.raises(ValueError, match="a keyboard layout"):
-        TrainConfig(task="toys/BitFlipPress-v0", algo="dqn", track="proprio", touch={"enabled": True, "goal_positions": True})
+        TrainConfig(
+            task="toys/BitFlipPress-v0", algo="dqn", track="proprio",
+            touch={"enabled": True, "goal_positions": True},
+        )  # fmt: skip
 
 
 # ---------------------------------------------------------------- JSON, and the configs of older runs
@@ -145,8 +148,9 @@ def test_train_config_json_round_trip(algo):
 
 def test_a_run_from_before_these_settings_compares_with_their_defaults(env_datasets, tmp_path):
     config = TrainConfig(
-        task=CONTINUOUS_TASK, algo="sac", dataset=str(env_datasets[CONTINUOUS_TASK]), track="proprio", touch={"enabled": True}
-    )
+        task=CONTINUOUS_TASK, algo="sac", dataset=str(env_datasets[CONTINUOUS_TASK]), track="proprio",
+        touch={"enabled": True},
+    )  # fmt: skip
     old = json.loads(json.dumps(config.to_json()))
     for key in ("goal_positions", "inputs"):
         del old["touch"][key]
