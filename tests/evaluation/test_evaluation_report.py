@@ -128,7 +128,8 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     report = write_report(runs, tmp_path / "report", title="Two seeds")
     assert sorted(p.name for p in (tmp_path / "report").iterdir()) == [
         "confusion_DiscreteArrows__dqn__custom_fp32_tactile-track.png", "confusion_not_ours.png",
-        "curves.png", "notes.txt", "results.md", "trajectories_DiscreteArrows__dqn__custom_fp32_tactile-track.png",
+        "curves.png", "notes.txt", "results.md",
+        "trajectories_DiscreteArrows__dqn__custom_fp32_tactile-track.png",
     ]  # fmt: skip
     text = report.read_text()
     assert text.startswith("# Two seeds")
