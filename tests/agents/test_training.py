@@ -716,7 +716,8 @@ def test_a_touch_run_trains_asymmetric_critics_on_the_labelled_poses(env_dataset
         agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
         evaluation={"test_episodes": 1, "snapshots": 1},
         replay={"capacity": 200},
-        track="proprio", touch={"enabled": True, "epochs": 2},
+        track="proprio",
+        touch={"enabled": True, "epochs": 2},
     )
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(TouchAgent, "update", recording_update)
@@ -746,7 +747,8 @@ def test_a_run_with_placed_goals_acts_on_env_observations_and_learns_on_placed_g
         agent=SACConfig(hidden=(16,), batch_size=8, critic_pose=True),
         evaluation={"test_episodes": 2, "snapshots": 1},
         replay={"capacity": 200},
-        track="proprio", touch={"enabled": True, "epochs": 2, "goal_positions": True},
+        track="proprio",
+        touch={"enabled": True, "epochs": 2, "goal_positions": True},
     )
     run = train_module.train(config, run_dir=tmp_path / "run", progress=False)
     _, env, agent = load_run(run)
@@ -776,7 +778,8 @@ def test_a_run_on_the_readout_learns_and_acts_on_it(env_datasets, tmp_path):
         agent=SACConfig(hidden=(16,), batch_size=8),
         evaluation={"test_episodes": 2, "snapshots": 1},
         replay={"capacity": 200},
-        track="proprio", touch={"enabled": True, "epochs": 2, "inputs": "readout"},
+        track="proprio",
+        touch={"enabled": True, "epochs": 2, "inputs": "readout"},
     )
     run = train_module.train(config, run_dir=tmp_path / "run", progress=False)
     _, env, agent = load_run(run)

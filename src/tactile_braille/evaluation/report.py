@@ -253,7 +253,8 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
         lines.append(
             f"| sim | {TASK_NAMES.get(task, task)} | {_label(algo, variant)} | {records[0].track} "
             f"| {len(records)} | {steps} | {accuracy} | {convergence} | {reached_text} | "
-            + " | ".join(paper_cells) + " |"
+            + " | ".join(paper_cells)
+            + " |"
         )
     return "\n".join(lines)
 
