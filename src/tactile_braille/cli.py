@@ -335,7 +335,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _sweep_overrides(args: argparse.Namespace) -> dict:
-    return {name: getattr(args, name) for name in ("epochs", "precision", "backend", "threads")
+    return {name: getattr(args, name) for name in ("epochs", "precision", "backend", "threads", "device")
             if getattr(args, name, None) is not None}  # fmt: skip
 
 
@@ -345,7 +345,7 @@ def _run_sweep(args: argparse.Namespace, trials) -> int:
 
     use_ray = {"auto": None, "yes": True, "no": False}[args.ray]
     runs = sweep(trials, args.root, use_ray=use_ray, address=args.address, cpus_per_trial=args.cpus_per_trial,
-                 max_failures=args.max_failures)  # fmt: skip
+                 max_failures=args.max_failures, jobs=args.jobs, archive=args.archive)  # fmt: skip
     if args.report is not None:
         report = write_report(runs, args.report, title=args.title)
         print(f"wrote {report}")
@@ -364,10 +364,15 @@ def _benchmark(args: argparse.Namespace) -> int:
     if not args.paper:
         raise ValueError("say which benchmark: --paper (the simulated part of the paper's Table III)")
     overrides = _sweep_overrides(args)
-    trials = [Trial(task, algo, seed, "paper", overrides) for task, algo in PAPER_SIM_RUNS
-              for seed in range(args.num_seeds)]  # fmt: skip
-    args.report = args.report or Path(args.root) / "report"
-    return _run_sweep(args, trials)
+    rows = [(task, algo) for task, algo in PAPER_SIM_RUNS if not args.tasks or task in args.tasks]
+    seeds = args.seeds if args.seeds is not None else range(args.num_seeds)
+    root, archive, report = Path(args.root), args.archive, args.report
+    for preset in args.presets:  # each preset's trials in its own folder (and archive folder)
+        trials = [Trial(task, algo, seed, preset, overrides) for task, algo in rows for seed in seeds]
+        args.root, args.archive = root / preset, archive / preset if archive else None
+        args.report = (report or root / "report") / preset
+        _run_sweep(args, trials)
+    return 0
 
 
 def _add_sweep_options(parser: argparse.ArgumentParser, root: str) -> None:
@@ -381,6 +386,12 @@ def _add_sweep_options(parser: argparse.ArgumentParser, root: str) -> None:
     parser.add_argument("--cpus-per-trial", type=float, default=2)
     parser.add_argument("--max-failures", type=int, default=2, help="retries of a failed trial")
     parser.add_argument("--title", default="Results", help="title of the report")
+    parser.add_argument("--device", default=None, help="torch device of every trial (cpu, cuda, cuda:N)")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="without Ray: trials run side by side, each in its own process")  # fmt: skip
+    parser.add_argument("--archive", type=Path, default=None,
+                        help="copy each finished trial's record (no checkpoint) here; trials archived "
+                        "complete are not run again")  # fmt: skip
 
 
 def _add_show_command(commands) -> None:
@@ -517,8 +528,12 @@ def _add_benchmark_command(commands) -> None:
     """The ``benchmark`` command."""
     bench = commands.add_parser("benchmark", help="reproduce the simulated part of the paper's Table III")
     bench.add_argument("--paper", action="store_true", help="the paper's 8 simulated task x algorithm runs")
-    bench.add_argument("--num-seeds", type=int, default=3)
-    bench.add_argument("--report", type=Path, default=None, help="default: ROOT/report")
+    bench.add_argument("--presets", nargs="+", choices=TRAINING_PRESETS, default=["paper"],
+                       help="one sweep per preset, in ROOT/PRESET (and ARCHIVE/PRESET)")  # fmt: skip
+    bench.add_argument("--tasks", nargs="+", default=None, help="only these tasks' rows (default: all)")
+    bench.add_argument("--num-seeds", type=int, default=5, help="seeds 0..N-1 (the paper's 5)")
+    bench.add_argument("--seeds", nargs="+", type=int, default=None, help="these seeds instead")
+    bench.add_argument("--report", type=Path, default=None, help="default: ROOT/report; one per preset")
     _add_sweep_options(bench, "runs/paper-benchmark")
     bench.set_defaults(handler=_benchmark)
 

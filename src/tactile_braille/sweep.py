@@ -4,7 +4,19 @@ Every trial is an ordinary training run in ``ROOT/{task}__{algo}__{seed}``.
 A trial whose folder holds a run is resumed (a finished one returns at once),
 so a sweep is resumable as a whole: run the same command again after a crash.
 Failed trials are retried (``max_failures`` times), each retry resuming from
-the trial's last checkpoint. With Ray (``pip install tactile_braille[sweep]``)
+the trial's last checkpoint. Without Ray, ``jobs`` trials run side by side,
+each in its own process (``tactile-braille sweep ... --jobs 14`` on a 16-core
+GPU machine, each trial on one thread, all sharing the GPU with ``--device
+cuda``).
+
+Results outlive the machine through an **archive** (``archive=DIR``,
+``--archive``): each finished trial's typing is evaluated (:func:`archive_run`)
+and its record, the small files that a report needs (settings, world, progress
+log, typing evaluation; no checkpoint), is copied to ``DIR/<name>``, a folder
+meant to be committed. A trial whose archived record is complete is not run
+again, even on a new machine whose run folders are gone; one archived part way
+(``tactile-braille archive RUN_DIR --into DIR`` before a machine is given back)
+is shown in reports as far as it went. With Ray (``pip install tactile_braille[sweep]``)
 trials run in parallel on the local machine, or on a cluster with
 ``address="ray://..."``; each trial asks for ``cpus_per_trial`` CPUs.
 
@@ -17,7 +29,10 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import json
+import multiprocessing
+import shutil
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,7 +40,7 @@ from typing import Any
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS
 from tactile_braille.agents.presets import preset_config
-from tactile_braille.agents.run import setting_differences
+from tactile_braille.agents.run import read_config, read_progress, setting_differences
 from tactile_braille.agents.training import train
 from tactile_braille.envs.registry import task_of
 
@@ -107,6 +122,49 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
+RECORD_FILES = ("config.json", "world.json", "progress.csv", "typing.json", "touch.json")
+"""What a run's archived record holds: everything a report reads, no checkpoint or replay."""
+
+
+def archive_run(run_dir: str | Path, into: str | Path) -> Path:
+    """Copy a run's record to ``into/<run folder name>`` (replacing an older copy), after evaluating
+    its typing on its last checkpoint where that is not done yet; returns the copy's folder."""
+    from tactile_braille.evaluation.protocol import evaluate_typing
+
+    run_dir = Path(run_dir)
+    read_config(run_dir)  # refuses a folder that holds no run
+    typing = run_dir / "typing.json"
+    epochs = len(read_progress(run_dir))
+    stale = not typing.exists() or json.loads(typing.read_text()).get("checkpoint_epoch") != epochs - 1
+    if stale and (run_dir / "checkpoint.pt").exists():
+        evaluate_typing(run_dir)
+    target = Path(into) / run_dir.name
+    target.mkdir(parents=True, exist_ok=True)
+    for name in RECORD_FILES:
+        if (run_dir / name).exists():
+            with atomic_path(target / name) as temporary:
+                shutil.copyfile(run_dir / name, temporary)
+        else:
+            (target / name).unlink(missing_ok=True)
+    return target
+
+
+def archived(trial: Trial, archive: str | Path | None) -> Path | None:
+    """The trial's archived record if it is complete (every epoch, typing evaluated at the last) and
+    was made with the trial's settings; else None."""
+    if archive is None:
+        return None
+    record = Path(archive) / trial.name
+    if not (record / "config.json").exists() or not (record / "typing.json").exists():
+        return None
+    wanted = trial.config()
+    if setting_differences(record, wanted) or read_config(record).epochs < wanted.epochs:
+        return None
+    epochs = len(read_progress(record))
+    typed = json.loads((record / "typing.json").read_text()).get("checkpoint_epoch")
+    return record if epochs >= wanted.epochs and typed == epochs - 1 else None
+
+
 def sweep(
     trials: Sequence[Trial],
     root: str | Path,
@@ -115,34 +173,63 @@ def sweep(
     cpus_per_trial: float = 2,
     max_failures: int = 2,
     progress: bool = True,
+    jobs: int = 1,
+    archive: str | Path | None = None,
 ) -> list[Path]:
-    """Run the trials; returns their run folders (in the order given).
+    """Run the trials; returns their run folders (in the order given), or their archived records
+    where those were complete before the sweep (:func:`archived`: such trials are not run).
 
-    ``use_ray=None`` uses Ray when it is installed.
+    ``use_ray=None`` uses Ray when it is installed; without it ``jobs`` trials run at a time, each in
+    its own process. ``archive``: a folder that receives each finished trial's record.
     """
+    if jobs < 1:
+        raise ValueError(f"jobs must be at least 1, got {jobs}")
     for trial in trials:
         trial.config()  # bad settings fail here, before any trial starts
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
+    done = {trial.name: archived(trial, archive) for trial in trials}
+    pending = [trial for trial in trials if done[trial.name] is None]
+    if progress and len(pending) < len(trials):
+        print(f"{len(trials) - len(pending)} trials archived complete in {archive}: not run again")
     if use_ray is None:
         use_ray = ray_available()
-    if use_ray:
-        _sweep_on_ray(trials, root, address, cpus_per_trial, max_failures)
+    if use_ray and pending:
+        _sweep_on_ray(pending, root, address, cpus_per_trial, max_failures)
+        for trial in pending if archive is not None else ():
+            archive_run(root / trial.name, archive)
+    elif jobs > 1 and len(pending) > 1:
+        context = multiprocessing.get_context("spawn")  # no torch state shared with the parent
+        with ProcessPoolExecutor(min(jobs, len(pending)), mp_context=context) as pool:
+            futures = [pool.submit(run_with_retries, t, root, max_failures, False, archive) for t in pending]
+            for future in futures:
+                future.result()  # the first failure stops the sweep (after running trials finish)
     else:
-        for number, trial in enumerate(trials, start=1):
+        for number, trial in enumerate(pending, start=1):
             if progress:
-                print(f"[{number}/{len(trials)}] {trial.name}")
-            for attempt in range(max_failures + 1):
-                try:
-                    run_trial(trial, root, progress=progress)
-                    break
-                except ValueError:  # wrong settings: a retry would fail the same way
-                    raise
-                except Exception as error:  # a retry resumes from the last checkpoint
-                    if attempt == max_failures:
-                        raise RuntimeError(f"trial {trial.name} failed {attempt + 1} times") from error
-                    print(f"trial {trial.name} failed ({error!r}); retrying from its last checkpoint")
-    return [root / trial.name for trial in trials]
+                print(f"[{number}/{len(pending)}] {trial.name}")
+            run_with_retries(trial, root, max_failures, progress, archive)
+    return [done[trial.name] or root / trial.name for trial in trials]
+
+
+def run_with_retries(
+    trial: Trial, root: Path, max_failures: int, progress: bool, archive: str | Path | None = None
+) -> Path:
+    """Run a trial, retrying a failure (each retry resumes from the last checkpoint); archive its
+    record when it has finished, if there is an archive."""
+    for attempt in range(max_failures + 1):
+        try:
+            run_dir = run_trial(trial, root, progress=progress)
+            if archive is not None:
+                archive_run(run_dir, archive)
+            return run_dir
+        except ValueError:  # wrong settings: a retry would fail the same way
+            raise
+        except Exception as error:  # a retry resumes from the last checkpoint
+            if attempt == max_failures:
+                raise RuntimeError(f"trial {trial.name} failed {attempt + 1} times") from error
+            print(f"trial {trial.name} failed ({error!r}); retrying from its last checkpoint")
+    raise AssertionError("unreachable")
 
 
 def _sweep_on_ray(trials, root: Path, address, cpus_per_trial: float, max_failures: int) -> None:

@@ -436,3 +436,74 @@ def test_targets_see_the_next_poses_and_the_critics_and_the_actors_loss_the_pose
     assert seen["target"] and all(torch.equal(p, next_poses) for p in seen["target"])
     # Both critics' losses and the actor's loss (the first critic, or both for SAC's minimum).
     assert len(seen["online"]) >= 3 and all(torch.equal(p, poses) for p in seen["online"])
+
+
+# ---------------------------------------------------------------- the released code's DQN
+def _blend(old: dict, new: dict, tau: float) -> dict:
+    return {name: (1 - tau) * old[name] + tau * new[name] for name in old}
+
+
+def _close(a: dict, b: dict) -> bool:
+    return all(torch.allclose(a[name], b[name], atol=1e-6) for name in a)
+
+
+@pytest.mark.parametrize("schedule", ["update", "epoch"])
+def test_the_dqn_target_moves_per_update_as_the_paper_or_once_per_epoch_as_the_release(tasks, schedule):
+    tau = 0.005 if schedule == "update" else 0.995
+    agent = build("dqn", tasks, target_update=schedule, tau=tau)
+    before = snapshot(agent.target)
+    for seed in range(3):
+        agent.update(make_batch("dqn", tasks, seed=seed))
+        online = snapshot(agent.q)
+        if schedule == "update":  # one Polyak step of tau after each update
+            assert _close(snapshot(agent.target), _blend(before, online, tau))
+            before = snapshot(agent.target)
+        else:  # the target stays put through the epoch's updates
+            assert same_tensors(snapshot(agent.target), before)
+    moved = snapshot(agent.target)
+    agent.end_epoch()
+    if schedule == "update":
+        assert same_tensors(snapshot(agent.target), moved)
+    else:  # then moves 99.5 % of the way to the online network (the release's `polyak: 0.005`)
+        assert _close(snapshot(agent.target), _blend(before, snapshot(agent.q), 0.995))
+
+
+def test_the_dqn_loss_is_half_the_squared_error_or_huber(tasks):
+    batch = make_batch("dqn", tasks)
+    losses = {}
+    for loss in ("mse", "huber"):
+        agent = build("dqn", tasks, loss=loss)
+        t = agent.tensors(batch)
+        with torch.no_grad():
+            next_q = agent.q(t["next_images"], t["goals"], t["next_previous_actions"])
+            chosen = agent.target(t["next_images"], t["goals"], t["next_previous_actions"]).gather(
+                -1, next_q.argmax(-1, keepdim=True)
+            )
+            target = t["rewards"] + 0.95 * (1 - t["dones"]) * chosen.squeeze(-1)
+            q = agent.q(*state_inputs(agent, batch)).gather(-1, t["actions"][:, None]).squeeze(-1)
+        error = q - target
+        huber = torch.where(error.abs() < 1, 0.5 * error**2, error.abs() - 0.5).mean()
+        losses[loss] = (
+            agent.update(batch)["losses/q_loss"],
+            (0.5 * error**2).mean() if loss == "mse" else huber,
+        )
+    for computed, expected in losses.values():
+        assert computed == pytest.approx(float(expected), rel=1e-5)
+
+
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_every_optimiser_takes_the_configured_adam_epsilon(tasks, algo):
+    agent = build(algo, tasks, adam_eps=1e-4)
+    optimisers = [value for value in vars(agent).values() if isinstance(value, torch.optim.Optimizer)]
+    assert optimisers and all(group["eps"] == 1e-4 for o in optimisers for group in o.param_groups)
+
+
+def test_exploration_steps_down_once_per_epoch_with_a_schedule_interval(tasks):
+    stepwise, staircase = build("dqn", tasks), build("dqn", tasks, schedule_interval=250)
+    assert stepwise.epsilon(100) == pytest.approx(1.0 - 0.9 * 100 / 2000)
+    assert [staircase.epsilon(s) for s in (0, 249, 250, 499, 500)] == pytest.approx(
+        [1.0, 1.0, 0.8875, 0.8875, 0.775]
+    )  # the released log's "Actor Noise": 0.8875, 0.775, ...
+    assert staircase.epsilon(10_000) == pytest.approx(0.1)
+    td3 = build("td3", tasks, schedule_interval=250, noise_start=1.0, noise_end=0.05)
+    assert [td3.noise(s) for s in (249, 250)] == pytest.approx([1.0, 1.0 - 0.95 * 250 / 2000])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK
@@ -50,11 +51,16 @@ def test_paper_preset_values(task, algo):
 
 
 RELEASED = {
-    "dqn": {"agent.test_epsilon": (0.0, 0.05)},
-    "sac_discrete": {},
+    "dqn": {
+        "agent.test_epsilon": (0.0, 0.05), "agent.target_update": ("update", "epoch"),
+        "agent.tau": (0.005, 0.995), "agent.schedule_interval": (1, 250),
+    },
+    "sac_discrete": {"agent.initial_alpha": (1.0, pytest.approx(np.exp(0.1 * np.log(5))))},
     "sac": {"agent.hidden": ([512], [1024, 512]), "max_episode_steps": (25, 35)},
-    "td3": {"agent.learning_rate": (5e-5, 7.5e-5), "update_every": (1, 100)},
-}
+    "td3": {
+        "agent.learning_rate": (5e-5, 7.5e-5), "update_every": (1, 100), "agent.schedule_interval": (1, 250),
+    },
+}  # fmt: skip
 """What the released code's configurations change from the paper's (dotted setting -> (paper, released))."""
 
 
@@ -77,8 +83,28 @@ def test_released_preset_values():
     assert (td3.agent.learning_rate, td3.update_every) == (7.5e-5, 100)
     sac = preset_config("released", CONTINUOUS_TASK, "sac")
     assert (sac.agent.hidden, sac.max_episode_steps) == ((1024, 512), 35)
-    assert preset_config("released", DISCRETE_TASK, "dqn").agent.test_epsilon == 0.05
-    assert preset_differences("released", DISCRETE_TASK, "sac_discrete") == []
+    dqn = preset_config("released", DISCRETE_TASK, "dqn").agent
+    assert (dqn.test_epsilon, dqn.target_update, dqn.tau, dqn.loss, dqn.adam_eps) == (
+        0.05,
+        "epoch",
+        0.995,
+        "mse",
+        1e-4,
+    )
+    assert preset_differences("released", DISCRETE_TASK, "sac_discrete") == [
+        "agent.initial_alpha: 1.0 -> 1.174618943088019"
+    ]
+
+
+@pytest.mark.parametrize("keys", ["arrows", "alphabet"])
+def test_td3_noise_is_the_released_codes_in_mm_for_both_paper_presets(keys):
+    task = f"tactile_braille/Continuous{keys.title()}-v0"
+    move_mm = {"arrows": 10.0, "alphabet": 20.0}[keys]
+    for preset in ("paper", "released"):
+        agent = preset_config(preset, task, "td3").agent
+        in_mm = [round(v * move_mm, 9) for v in (agent.noise_start, agent.noise_end, agent.target_noise,
+                                                 agent.noise_clip)]  # fmt: skip
+        assert in_mm == [1.0, 0.05, 0.05, 0.2]
 
 
 def test_preset_errors_and_overrides():

@@ -87,6 +87,9 @@ class Agent:
             name: torch.as_tensor(value).to(self.device, non_blocking=True) for name, value in batch.items()
         }
 
+    def end_epoch(self) -> None:
+        """Called by the training loop after each epoch's steps and updates, before its test."""
+
     def state_dict(self) -> dict:
         state = {}
         for name in self.checkpointed:

@@ -38,6 +38,8 @@ Backend = Literal["dataset", "render", "rig"]
 Precision = Literal["fp32", "bf16"]
 RelabelRule = Literal["paper", "all"]
 TouchInputs = Literal["features", "readout"]
+TargetUpdate = Literal["update", "epoch"]
+QLoss = Literal["mse", "huber"]
 Track = Literal["tactile", "proprio"]
 
 PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
@@ -60,13 +62,13 @@ def _check_hyperparameters(config) -> None:
         problems.append(f"gamma must be in [0, 1], got {config.gamma}")
     if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
         problems.append(f"tau must be in (0, 1], got {config.tau}")
-    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha"):
+    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps"):
         if getattr(config, name, 1.0) <= 0:
             problems.append(f"{name} must be positive, got {getattr(config, name)}")
     hidden = getattr(config, "hidden", (1,))
     if not hidden or min(hidden) < 1:
         problems.append(f"hidden needs at least one positive layer size, got {hidden}")
-    for name in ("epsilon_decay_steps", "noise_decay_steps", "policy_delay"):
+    for name in ("epsilon_decay_steps", "noise_decay_steps", "policy_delay", "schedule_interval"):
         if getattr(config, name, 1) < 1:
             problems.append(f"{name} must be at least 1, got {getattr(config, name)}")
     for name in ("epsilon_start", "epsilon_end", "test_epsilon", "target_entropy_ratio"):
@@ -86,9 +88,18 @@ class DQNConfig:
     Attributes:
         gamma: discount.
         learning_rate: Adam's step size.
-        tau: Polyak factor of the soft target update (per update).
+        adam_eps: Adam's epsilon (the released code's 1e-4; torch's default is 1e-8).
+        tau: the share of the way the target network moves towards the online one at each
+            target update (the paper's Polyak 0.005 per update; the released code moved it
+            0.995 of the way once per epoch).
+        target_update: when the target moves: after every gradient ``"update"`` (the paper's
+            Table II) or at the end of every ``"epoch"`` (the released code).
+        loss: the TD loss: ``"mse"`` (half the mean squared error, the released code's) or
+            ``"huber"`` (smooth L1).
         epsilon_start, epsilon_end: exploration at the start and end of the schedule.
         epsilon_decay_steps: environment steps over which epsilon decays linearly.
+        schedule_interval: epsilon follows its schedule in steps of this many environment steps
+            (1: every step; the released code: once per 250-step epoch, a staircase).
         test_epsilon: exploration during test episodes (the paper: 0, deterministic;
             the released code: 0.05).
         batch_size: transitions per update.
@@ -98,10 +109,14 @@ class DQNConfig:
 
     gamma: float = 0.95
     learning_rate: float = 5e-4
+    adam_eps: float = 1e-4
     tau: float = 0.005
+    target_update: TargetUpdate = "update"
+    loss: QLoss = "mse"
     epsilon_start: float = 1.0
     epsilon_end: float = 0.1
     epsilon_decay_steps: int = 2000
+    schedule_interval: int = 1
     test_epsilon: float = 0.0
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
@@ -119,6 +134,7 @@ class SACConfig:
         gamma: discount.
         learning_rate: actor and critic step size.
         alpha_learning_rate: temperature step size.
+        adam_eps: Adam's epsilon, for every optimiser (the released code's 1e-4).
         initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
             every step alive, and pressing ends an episode: a high temperature delays the first
             presses until it has fallen (docs/agents.md).
@@ -137,6 +153,7 @@ class SACConfig:
     gamma: float = 0.95
     learning_rate: float = 5e-4
     alpha_learning_rate: float = 1e-3
+    adam_eps: float = 1e-4
     initial_alpha: float = 1.0
     target_entropy: float = -6.0
     tau: float = 0.005
@@ -158,6 +175,7 @@ class DiscreteSACConfig:
         gamma: discount (the paper's 0.6 for discrete SAC).
         learning_rate: actor and critic step size.
         alpha_learning_rate: temperature step size.
+        adam_eps: Adam's epsilon, for every optimiser (the released code's 1e-4).
         initial_alpha: the temperature at the start (the paper's 1). The entropy bonus pays
             every step alive, and pressing ends an episode: a high temperature delays the first
             presses until it has fallen (docs/agents.md).
@@ -175,6 +193,7 @@ class DiscreteSACConfig:
     gamma: float = 0.6
     learning_rate: float = 5e-4
     alpha_learning_rate: float = 1e-3
+    adam_eps: float = 1e-4
     initial_alpha: float = 1.0
     target_entropy_ratio: float = 0.1
     tau: float = 0.005
@@ -194,10 +213,13 @@ class TD3Config:
     Attributes:
         gamma: discount.
         learning_rate: actor and critic step size (the paper's 5e-5; the released code's 7.5e-5).
+        adam_eps: Adam's epsilon, for both optimisers (the released code's 1e-4).
         tau: Polyak factor of the targets (the paper's polyak 0.995).
         noise_start, noise_end: standard deviation of the exploration noise
-            at the start and the end of its linear schedule.
+            at the start and the end of its linear schedule (in the action's [-1, 1] units).
         noise_decay_steps: environment steps over which the noise decays.
+        schedule_interval: the noise follows its schedule in steps of this many environment
+            steps (1: every step; the released code: once per 250-step epoch).
         test_noise: noise during test episodes (0: deterministic).
         target_noise: standard deviation of the target-policy smoothing noise.
         noise_clip: bound of the smoothing noise.
@@ -211,10 +233,12 @@ class TD3Config:
 
     gamma: float = 0.95
     learning_rate: float = 5e-5
+    adam_eps: float = 1e-4
     tau: float = 0.005
     noise_start: float = 1.0
     noise_end: float = 0.05
     noise_decay_steps: int = 2000
+    schedule_interval: int = 1
     test_noise: float = 0.0
     target_noise: float = 0.05
     noise_clip: float = 0.2

@@ -2,7 +2,9 @@
 
 Reads top to bottom: hyperparameters, acting (epsilon-greedy with the paper's
 linear schedule), and the update (double-DQN target from the online network's
-argmax, evaluated by a Polyak-averaged target network).
+argmax, evaluated by a target network that moves towards the online one after
+every update, as the paper's Table II, or once per epoch, as the released
+code: ``target_update``).
 """
 
 from __future__ import annotations
@@ -53,11 +55,12 @@ class DQNAgent(Agent):
             self.num_actions, goal_size, previous_size, self.config.hidden, **options
         ).to(self.device)
         self.target = copy.deepcopy(self.q).requires_grad_(False)
-        self.optimiser = adam(self.q.parameters(), self.config.learning_rate)
+        self.optimiser = adam(self.q.parameters(), self.config.learning_rate, self.config.adam_eps)
 
     def epsilon(self, step: int) -> float:
-        """Exploration rate after ``step`` environment steps."""
+        """Exploration rate after ``step`` environment steps (held for ``schedule_interval`` steps)."""
         config = self.config
+        step -= step % config.schedule_interval
         fraction = min(step / max(config.epsilon_decay_steps, 1), 1.0)
         return config.epsilon_start + fraction * (config.epsilon_end - config.epsilon_start)
 
@@ -93,9 +96,15 @@ class DQNAgent(Agent):
                 target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
             q_all = self.q(t["images"], t["goals"], t["previous_actions"])
             q = q_all.gather(-1, t["actions"][:, None]).squeeze(-1).float()
-            loss = F.smooth_l1_loss(q, target)
+            loss = F.smooth_l1_loss(q, target) if self.config.loss == "huber" else 0.5 * F.mse_loss(q, target)
         self.optimiser.zero_grad(set_to_none=True)
         loss.backward()
         self.optimiser.step()
-        soft_update(self.q, self.target, self.config.tau)
+        if self.config.target_update == "update":
+            soft_update(self.q, self.target, self.config.tau)
         return {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
+
+    def end_epoch(self) -> None:
+        """The released code's target update: once per epoch, ``tau`` of the way to the online net."""
+        if self.config.target_update == "epoch":
+            soft_update(self.q, self.target, self.config.tau)

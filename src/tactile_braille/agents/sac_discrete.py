@@ -64,9 +64,11 @@ class DiscreteSACAgent(Agent):
             (1,), math.log(config.initial_alpha), device=self.device, requires_grad=True
         )
         self.target_entropy = config.target_entropy_ratio * math.log(self.num_actions)
-        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)
-        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate)
-        self.alpha_optimiser = torch.optim.Adam([self.log_alpha], lr=config.alpha_learning_rate)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, config.adam_eps)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, config.adam_eps)
+        self.alpha_optimiser = torch.optim.Adam(
+            [self.log_alpha], lr=config.alpha_learning_rate, eps=config.adam_eps
+        )
 
     @torch.no_grad()
     def policy_action(

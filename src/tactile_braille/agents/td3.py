@@ -80,13 +80,14 @@ class TD3Agent(Agent):
         )
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.actor_target.requires_grad_(False)
-        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate)
-        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate)
+        self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, config.adam_eps)
+        self.critic_optimiser = adam(self.critics.parameters(), config.learning_rate, config.adam_eps)
         self.critic_updates = torch.zeros((), dtype=torch.int64)
 
     def noise(self, step: int) -> float:
-        """Exploration noise after ``step`` environment steps."""
+        """Exploration noise after ``step`` environment steps (held for ``schedule_interval`` steps)."""
         config = self.config
+        step -= step % config.schedule_interval
         fraction = min(step / max(config.noise_decay_steps, 1), 1.0)
         return config.noise_start + fraction * (config.noise_end - config.noise_start)
 

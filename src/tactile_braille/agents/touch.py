@@ -110,6 +110,9 @@ class TouchAgent:
             batch["next_poses"] = self.touch.standardise(batch["next_poses"])
         return self.agent.update(batch)
 
+    def end_epoch(self) -> None:
+        self.agent.end_epoch()
+
     def fit(self, encoder: TouchEncoder) -> None:
         """Take a fitted encoder's weights."""
         self.touch.load_state_dict(encoder.state_dict())

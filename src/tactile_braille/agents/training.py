@@ -97,6 +97,7 @@ def train(
                         # Merged, so that a loss some updates skip (TD3's delayed actor) keeps its last value.
                         losses.update(agent.update(buffer.sample(batch_size, rng)))
                         counters.updates += 1
+            agent.end_epoch()
             train_time = time.perf_counter() - started
             tests = evaluate(agent, test_env, config.evaluation.test_episodes, seed=10_000 * (epoch + 1))
             counters.epoch = epoch

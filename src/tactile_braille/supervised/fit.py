@@ -64,10 +64,10 @@ def fit_minibatches(
     return epochs
 
 
-def adam(parameters, learning_rate: float) -> torch.optim.Adam:
+def adam(parameters, learning_rate: float, eps: float = 1e-8) -> torch.optim.Adam:
     """Adam, fused when the parameters' device supports it (CPU and CUDA do in PyTorch >= 2.4)."""
     parameters = list(parameters)
     try:
-        return torch.optim.Adam(parameters, lr=learning_rate, fused=True)
+        return torch.optim.Adam(parameters, lr=learning_rate, eps=eps, fused=True)
     except (RuntimeError, ValueError):  # device without a fused kernel
-        return torch.optim.Adam(parameters, lr=learning_rate)
+        return torch.optim.Adam(parameters, lr=learning_rate, eps=eps)
