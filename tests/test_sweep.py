@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from tactile_braille.agents import read_progress
+from tactile_braille.evaluation.report import load_records
 from tactile_braille.sweep import Trial, plan, run_trial, sweep
 
 TINY = {
@@ -71,6 +74,34 @@ def test_sequential_sweep_is_resumable_and_retries(env_datasets, tmp_path, monke
     monkeypatch.setattr(sweep_module, "run_trial", broken)
     with pytest.raises(RuntimeError, match="failed 2 times"):
         sweep(more, tmp_path, use_ray=False, progress=False, max_failures=1)
+
+
+def test_trials_run_side_by_side_and_archived_ones_are_not_run_again(env_datasets, tmp_path):
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+    trials = plan(["DiscreteArrows-v0"], ["dqn"], [0, 1], dataset=dataset, **TINY)
+    archive = tmp_path / "results"
+    runs = sweep(trials, tmp_path / "machine1", use_ray=False, progress=False, jobs=2, archive=archive)
+    assert [len(read_progress(run)) for run in runs] == [1, 1]
+    for trial, run in zip(trials, runs, strict=True):
+        record = archive / trial.name
+        assert sorted(p.name for p in record.iterdir()) == ["config.json", "progress.csv", "typing.json",
+                                                            "world.json"]  # fmt: skip
+        assert (record / "progress.csv").read_text() == (run / "progress.csv").read_text()
+        typing = json.loads((record / "typing.json").read_text())
+        assert typing["checkpoint_epoch"] == 0 and "released_protocol" in typing
+    # A new machine: the run folders are gone, the archive was committed. Nothing is run again,
+    # and the sweep answers with the archived records, which a report reads.
+    again = sweep(trials, tmp_path / "machine2", use_ray=False, progress=False, jobs=2, archive=archive)
+    assert again == [archive / trial.name for trial in trials]
+    assert not (tmp_path / "machine2" / trials[0].name).exists()
+    records = load_records(again, evaluate_missing=False)
+    assert [r.typing["checkpoint_epoch"] for r in records] == [0, 0]
+    # More epochs than archived: the trial runs (here from scratch, its checkpoint being elsewhere).
+    longer = plan(["DiscreteArrows-v0"], ["dqn"], [0], dataset=dataset, **{**TINY, "epochs": 2})
+    [run] = sweep(longer, tmp_path / "machine2", use_ray=False, progress=False, archive=archive)
+    assert len(read_progress(run)) == 2 and len(read_progress(archive / trials[0].name)) == 2
+    with pytest.raises(ValueError, match="jobs must be at least 1"):
+        sweep(trials, tmp_path, use_ray=False, jobs=0)
 
 
 @pytest.mark.slow

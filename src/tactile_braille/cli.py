@@ -524,6 +524,24 @@ def _add_sweep_command(commands) -> None:
     sweeper.set_defaults(handler=_sweep)
 
 
+def _archive(args: argparse.Namespace) -> int:
+    from tactile_braille.sweep import archive_run
+
+    for run in args.runs:
+        print(f"archived {run} in {archive_run(run, args.into)}")
+    return 0
+
+
+def _add_archive_command(commands) -> None:
+    """The ``archive`` command."""
+    archive = commands.add_parser(
+        "archive", help="copy runs' records (settings, world, progress, typing; no checkpoint) to a folder"
+    )
+    archive.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
+    archive.add_argument("--into", type=Path, required=True, help="the records go to INTO/<run folder name>")
+    archive.set_defaults(handler=_archive)
+
+
 def _add_benchmark_command(commands) -> None:
     """The ``benchmark`` command."""
     bench = commands.add_parser("benchmark", help="reproduce the simulated part of the paper's Table III")
@@ -604,6 +622,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_train_command(commands)
     _add_report_command(commands)
     _add_evaluate_command(commands)
+    _add_archive_command(commands)
     _add_sweep_command(commands)
     _add_benchmark_command(commands)
     _add_data_command(commands)

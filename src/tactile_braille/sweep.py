@@ -135,7 +135,8 @@ def archive_run(run_dir: str | Path, into: str | Path) -> Path:
     read_config(run_dir)  # refuses a folder that holds no run
     typing = run_dir / "typing.json"
     epochs = len(read_progress(run_dir))
-    stale = not typing.exists() or json.loads(typing.read_text()).get("checkpoint_epoch") != epochs - 1
+    evaluated = json.loads(typing.read_text()) if typing.exists() else {}
+    stale = evaluated.get("checkpoint_epoch") != epochs - 1 or "released_protocol" not in evaluated
     if stale and (run_dir / "checkpoint.pt").exists():
         evaluate_typing(run_dir)
     target = Path(into) / run_dir.name

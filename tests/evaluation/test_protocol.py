@@ -105,6 +105,24 @@ def test_typing_continues_from_where_the_last_press_left_the_sensor(arrows_env):
         arrows_env.reset(options={"keep_poses": True})
 
 
+def test_the_released_protocol_starts_every_key_from_a_random_pose(arrows_env):
+    """The released scripts reset before every key: pressing at once then types each key of a sequence
+    from wherever its own random start fell, not one key for the whole sequence."""
+    paper = type_sequences(PressAtOnce(), arrows_env, paper_sequences("arrows"), seed=0)
+    released = type_sequences(
+        PressAtOnce(), arrows_env, paper_sequences("arrows"), seed=0, protocol="released"
+    )
+    assert all(len(set(typed)) == 1 for typed in paper.typed)
+    assert any(len(set(typed)) > 1 for typed in released.typed)
+    oracle = type_sequences(
+        Oracle(arrows_env), arrows_env, paper_sequences("arrows"), seed=3, protocol="released"
+    )
+    assert oracle.accuracy == 1.0
+    assert all(1 <= steps <= 4 for sequence in oracle.steps for steps in sequence)  # each from its own start
+    with pytest.raises(ValueError, match="protocol must be one of"):
+        type_sequences(Oracle(arrows_env), arrows_env, [("UP",)], protocol="robot")
+
+
 def test_unknown_keys_in_a_sequence_are_refused(arrows_env):
     with pytest.raises(ValueError, match="not among the task's keys"):
         type_sequences(PressAtOnce(), arrows_env, [("UP", "Q")])

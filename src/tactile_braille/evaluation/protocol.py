@@ -10,6 +10,13 @@ typed right when the first key pressed for it is the goal; a key not pressed
 within the episode limit (25 steps; 35 with the released SAC preset) counts as missed, and typing goes on with
 the next key from where the sensor is.
 
+The released code's evaluation scripts (``evaluate_model.py``) differ: they
+reset the environment, so a fresh random start pose, before **every** key.
+``protocol="released"`` types that way (deterministic actions for every
+algorithm; the released continuous SAC sampled its actions). Which one the
+paper's Table III used: docs/evaluation.md (the evidence favours the
+released one).
+
 Metrics: typing accuracy (keys typed right / keys asked), typing efficiency
 (total steps over all sequences, the paper's "steps"), and a confusion matrix
 (rows: goal key; columns: the task's keys, then ``OTHER`` for a key outside
@@ -105,12 +112,21 @@ class TypingResult:
         }
 
 
-def type_sequences(agent, env: gym.Env, sequences: list[tuple[str, ...]], seed: int = 0) -> TypingResult:
+PROTOCOLS = ("paper", "released")
+"""Typing protocols: the paper's (no reset between keys) and the released code's (a reset per key)."""
+
+
+def type_sequences(
+    agent, env: gym.Env, sequences: list[tuple[str, ...]], seed: int = 0, protocol: str = "paper"
+) -> TypingResult:
     """Type each sequence with the agent's test-time actions (see the module docstring).
 
     ``env`` is a braille environment made with ``gym.make`` (its time limit
-    cuts each key's attempt).
+    cuts each key's attempt). ``protocol``: ``"paper"`` keeps the sensor where
+    each press left it; ``"released"`` starts every key from a random pose.
     """
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
     keys = tuple(env.unwrapped.goal_keys)
     for sequence in sequences:
         unknown = set(sequence) - set(keys)
@@ -123,7 +139,8 @@ def type_sequences(agent, env: gym.Env, sequences: list[tuple[str, ...]], seed: 
         for position, goal in enumerate(sequence):
             episode = run_episode(
                 agent, env, rng, seed=seed + number if position == 0 else None,
-                options={"goal_key": goal, "keep_pose": position > 0}, deterministic=True,
+                options={"goal_key": goal, "keep_pose": position > 0 and protocol == "paper"},
+                deterministic=True,
             )  # fmt: skip
             pressed = NONE
             if episode.terminated:
@@ -158,6 +175,8 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
               **result.summary()}  # fmt: skip
     output["confusion"] = {"rows": list(result.keys), "columns": list(result.columns),
                            "counts": result.confusion().tolist()}  # fmt: skip
+    released = type_sequences(agent, env, paper_sequences(keys), seed=seed, protocol="released")
+    output["released_protocol"] = released.summary()
     if keys == "alphabet" and sentences:
         typed = type_sequences(agent, env, [text_keys(s) for s in SENTENCES], seed=seed + 1_000)
         output["sentences"] = [
