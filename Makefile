@@ -51,11 +51,13 @@ bench: $(STAMP)
 	$(PY) benchmarks/separability.py
 	$(PY) benchmarks/train_throughput.py
 
-# docs/results.md, generated whole from the training runs under runs/ (not committed: they are
-# made by `tactile-braille train`, see docs/results.md for the list and the commands).
+# docs/results.md, generated whole from the runs' records committed under results/ (settings, world,
+# progress and typing of each run; no checkpoints: `tactile-braille benchmark ... --archive results/...`
+# and `tactile-braille archive` write them). Runs on any machine, no training needed.
+RECORDS = $(sort $(dir $(wildcard results/*/*/*/config.json)))
 results: $(STAMP)
-	$(TB) report runs/paper/* runs/fast/* runs/ablation/* --output docs/results.md \
-		--notes docs/results-notes.md --title "Results: the paper's presets and ours"
+	$(TB) report $(RECORDS) --output docs/results.md \
+		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

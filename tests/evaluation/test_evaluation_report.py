@@ -41,8 +41,10 @@ def test_iqm_trims_a_quarter_at_each_end():
     assert np.isnan(iqm([]))
 
 
-def record(task, algo, seed, returns, accuracy=None, steps=None):
+def record(task, algo, seed, returns, accuracy=None, steps=None, reset=None):
     typing = None if accuracy is None else {"accuracy": accuracy, "total_steps": steps}
+    if reset is not None:
+        typing["released_protocol"] = {"accuracy": reset[0], "total_steps": reset[1]}
     return RunRecord(path=f"runs/{task}/{seed}", task=task, algo=algo, seed=seed, returns=np.array(returns),
                      typing=typing)  # fmt: skip
 
@@ -51,16 +53,16 @@ def test_results_table_has_the_papers_shape_and_numbers():
     records = [
         record("DiscreteArrows-v0", "dqn", 0, [0.2, 0.96, 1.0], 1.0, 240),
         record("DiscreteArrows-v0", "dqn", 1, [0.1, 0.5, 1.0], 1.0, 250),
-        record("DiscreteAlphabet-v0", "dqn", 0, [0.1, 0.5, 0.9], 0.9, 1800),
+        record("DiscreteAlphabet-v0", "dqn", 0, [0.1, 0.5, 0.9], 0.9, 1800, reset=(0.8, 1900)),
         record("DiscreteArrows-v0", "sac_discrete", 0, [0.0, 0.2, 0.5], 0.5, 400),
     ]
     groups = group(records)
     assert list(groups) == [("DiscreteArrows-v0", "dqn", ""), ("DiscreteArrows-v0", "sac_discrete", ""),
                             ("DiscreteAlphabet-v0", "dqn", "")]  # fmt: skip
     table = results_table(groups).splitlines()
-    assert table[0].count("|") == 13
+    assert table[0].count("|") == 15
     arrows_dqn = table[2]
-    assert "| disc arrow | DQN | tactile | 2 | 245 [240, 250] | 1.000 [1.000, 1.000] |" in arrows_dqn
+    assert "| disc arrow | DQN | tactile | 2 | 245 [240, 250] | 1.000 [1.000, 1.000] | - | - |" in arrows_dqn
     assert "2.5 [2.0, 3.0]" in arrows_dqn  # convergence epochs 2 and 3 (95 % of 1.0; counted from 1)
     assert arrows_dqn.endswith("| 230 | 1.000 | 8 |")  # the paper's Table III
     assert "0/1 reached" in table[3]  # discrete SAC never reached 0.95
@@ -68,6 +70,7 @@ def test_results_table_has_the_papers_shape_and_numbers():
     with pytest.raises(ValueError, match="repeats seed 0"):
         group([*records, record("DiscreteArrows-v0", "dqn", 0, [0.5])])
     assert table[4].endswith("| 1722 | 0.981 | 45 |")
+    assert "| 1800 (one run) | 0.900 (one run) | 1900 (one run) | 0.800 (one run) |" in table[4]
 
 
 def test_runs_of_two_tracks_are_tabled_apart_under_their_tracks():

@@ -88,6 +88,8 @@ class RunRecord:
     seed: int
     returns: np.ndarray
     typing: dict | None = None
+    seconds: float = float("nan")
+    """Wall-clock of the run's epochs (training and tests, from ``progress.csv``)."""
     config: TrainConfig | None = field(default=None, repr=False)
     world: str | None = GENERATOR_VERSION
     """The generator version (or the real rig) of the world the run learned in; ``None`` where
@@ -148,6 +150,7 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
         records.append(RunRecord(
             path=run_dir, task=task_name(config.task), algo=config.algo, seed=config.seed,
             returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
+            seconds=float(np.nansum([row.get("time_s", np.nan) for row in rows])),
             world=(GENERATOR_VERSION if task_of(config.task) is None else None)
             if world is None else world.get("generator_version", world.get("rig")),
         ))  # fmt: skip
@@ -346,6 +349,19 @@ def plot_trajectories(record: RunRecord, path: str | Path, goals: int = 3, seed:
     return save_figure(fig, path)
 
 
+def _run_line(record: RunRecord) -> str:
+    """One run of a group: where it is, how far it went, how long it took, how it types."""
+    config = record.config
+    machine = f"{config.device}, {config.threads} thread{'s' * (config.threads > 1)}" if config else "?"
+    line = (f"- `{record.path}`: seed {record.seed}, {len(record.returns)} epochs in "
+            f"{record.seconds / 60:.0f} min ({machine}), convergence {record.convergence}")  # fmt: skip
+    if not record.typing:
+        return line + " (no typing evaluation)"
+    line += f", typing accuracy {record.typing['accuracy']:.3f} in {record.typing['total_steps']} steps"
+    reset = record.typing.get("released_protocol")
+    return line + (f" (reset per key: {reset['accuracy']:.3f} in {reset['total_steps']})" if reset else "")
+
+
 def write_report(
     run_dirs, output: str | Path, title: str = "Results", notes: str | None = None, command: str | None = None
 ) -> Path:
@@ -394,10 +410,7 @@ def write_report(
             f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""
         )
         lines += [f"## {task}, {_label(algo, variant)}", ""]
-        lines += [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs, convergence {r.convergence}, "
-                  f"typing accuracy {r.typing['accuracy']:.3f} in {r.typing['total_steps']} steps"
-                  if r.typing else f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs (no checkpoint)"
-                  for r in records]  # fmt: skip
+        lines += [_run_line(r) for r in records]
         typed = [r for r in records if r.typing]
         if typed:
             confusion = np.sum([r.typing["confusion"]["counts"] for r in typed], axis=0)
