@@ -8,7 +8,7 @@ import pytest
 
 from tactile_braille.agents import read_progress
 from tactile_braille.evaluation.report import load_records
-from tactile_braille.sweep import Trial, plan, run_trial, sweep
+from tactile_braille.sweep import Trial, archive_run, plan, run_trial, sweep
 
 TINY = {
     "epochs": 1,
@@ -102,6 +102,18 @@ def test_trials_run_side_by_side_and_archived_ones_are_not_run_again(env_dataset
     assert len(read_progress(run)) == 2 and len(read_progress(archive / trials[0].name)) == 2
     with pytest.raises(ValueError, match="jobs must be at least 1"):
         sweep(trials, tmp_path, use_ray=False, jobs=0)
+    # An archive never loses a record: other settings are refused before anything runs, a shorter
+    # record does not replace a longer one; where a run was made (threads, device) does not matter.
+    other = plan(["DiscreteArrows-v0"], ["dqn"], [1], dataset=dataset, **{**TINY, "precision": "bf16"})
+    with pytest.raises(ValueError, match=r"other settings \(precision"):
+        sweep(other, tmp_path / "machine3", use_ray=False, progress=False, archive=archive)
+    assert not (tmp_path / "machine3" / other[0].name).exists()
+    with pytest.raises(ValueError, match="holds a longer record"):
+        archive_run(runs[0], archive)
+    elsewhere = plan(["DiscreteArrows-v0"], ["dqn"], [1], dataset=dataset, **{**TINY, "threads": 2})
+    assert sweep(elsewhere, tmp_path / "machine3", use_ray=False, progress=False, archive=archive) == [
+        archive / trials[1].name
+    ]
 
 
 @pytest.mark.slow

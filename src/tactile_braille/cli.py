@@ -365,6 +365,10 @@ def _benchmark(args: argparse.Namespace) -> int:
         raise ValueError("say which benchmark: --paper (the simulated part of the paper's Table III)")
     overrides = _sweep_overrides(args)
     rows = [(task, algo) for task, algo in PAPER_SIM_RUNS if not args.tasks or task in args.tasks]
+    unknown = set(args.tasks or ()) - {task for task, _ in PAPER_SIM_RUNS}
+    if unknown:
+        raise ValueError(f"no Table III rows for {sorted(unknown)}; the tasks are "
+                         f"{sorted({task for task, _ in PAPER_SIM_RUNS})}")  # fmt: skip
     seeds = args.seeds if args.seeds is not None else range(args.num_seeds)
     root, archive, report = Path(args.root), args.archive, args.report
     for preset in args.presets:  # each preset's trials in its own folder (and archive folder)

@@ -32,13 +32,13 @@ import json
 import multiprocessing
 import shutil
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from tactile_braille._io import atomic_path
-from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS
+from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, differences
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.run import read_config, read_progress, setting_differences
 from tactile_braille.agents.training import train
@@ -124,6 +124,13 @@ def ray_available() -> bool:
 
 RECORD_FILES = ("config.json", "world.json", "progress.csv", "typing.json", "touch.json")
 """What a run's archived record holds: everything a report reads, no checkpoint or replay."""
+MACHINE_SETTINGS = ("epochs", "device", "threads", "dataset")
+"""Settings in which a run may differ from its archived record (where it ran, and how far)."""
+
+
+def record_differences(record: Path, config) -> list[str]:
+    """The settings, machine settings aside, in which an archived record differs from ``config``."""
+    return differences(read_config(record), config, ignore=MACHINE_SETTINGS)
 
 
 def archive_run(run_dir: str | Path, into: str | Path) -> Path:
@@ -132,14 +139,21 @@ def archive_run(run_dir: str | Path, into: str | Path) -> Path:
     from tactile_braille.evaluation.protocol import evaluate_typing
 
     run_dir = Path(run_dir)
-    read_config(run_dir)  # refuses a folder that holds no run
-    typing = run_dir / "typing.json"
+    config = read_config(run_dir)  # refuses a folder that holds no run
+    target = Path(into) / run_dir.name
     epochs = len(read_progress(run_dir))
+    if (target / "config.json").exists():  # never lose a record: refuse another run's, or a longer one
+        other = record_differences(target, config)
+        if other:
+            raise ValueError(f"{target} holds the record of a run with other settings ({', '.join(other)})")
+        if len(read_progress(target)) > epochs:
+            raise ValueError(f"{target} holds a longer record ({len(read_progress(target))} epochs) than "
+                             f"{run_dir} ({epochs}); archive elsewhere or remove it")  # fmt: skip
+    typing = run_dir / "typing.json"
     evaluated = json.loads(typing.read_text()) if typing.exists() else {}
     stale = evaluated.get("checkpoint_epoch") != epochs - 1 or "released_protocol" not in evaluated
     if stale and (run_dir / "checkpoint.pt").exists():
         evaluate_typing(run_dir)
-    target = Path(into) / run_dir.name
     target.mkdir(parents=True, exist_ok=True)
     for name in RECORD_FILES:
         if (run_dir / name).exists():
@@ -159,8 +173,10 @@ def archived(trial: Trial, archive: str | Path | None) -> Path | None:
     if not (record / "config.json").exists() or not (record / "typing.json").exists():
         return None
     wanted = trial.config()
-    if setting_differences(record, wanted) or read_config(record).epochs < wanted.epochs:
-        return None
+    other = record_differences(record, wanted)
+    if other:
+        raise ValueError(f"{record} holds the record of a run with other settings ({', '.join(other)}); "
+                         "use another --archive")  # fmt: skip
     epochs = len(read_progress(record))
     typed = json.loads((record / "typing.json").read_text()).get("checkpoint_epoch")
     return record if epochs >= wanted.epochs and typed == epochs - 1 else None
@@ -196,15 +212,21 @@ def sweep(
     if use_ray is None:
         use_ray = ray_available()
     if use_ray and pending:
-        _sweep_on_ray(pending, root, address, cpus_per_trial, max_failures)
-        for trial in pending if archive is not None else ():
-            archive_run(root / trial.name, archive)
+        try:
+            _sweep_on_ray(pending, root, address, cpus_per_trial, max_failures)
+        finally:  # what finished is archived, even when another trial failed
+            for trial in pending if archive is not None else ():
+                if (root / trial.name / "config.json").exists():
+                    archive_run(root / trial.name, archive)
     elif jobs > 1 and len(pending) > 1:
         context = multiprocessing.get_context("spawn")  # no torch state shared with the parent
         with ProcessPoolExecutor(min(jobs, len(pending)), mp_context=context) as pool:
             futures = [pool.submit(run_with_retries, t, root, max_failures, False, archive) for t in pending]
-            for future in futures:
-                future.result()  # the first failure stops the sweep (after running trials finish)
+            done_futures, _ = wait(futures, return_when=FIRST_EXCEPTION)
+            failed = [future for future in done_futures if future.exception() is not None]
+            if failed:  # the trials not started are dropped; those running finish and are kept
+                pool.shutdown(cancel_futures=True)
+                raise failed[0].exception()
     else:
         for number, trial in enumerate(pending, start=1):
             if progress:

@@ -199,3 +199,19 @@ def test_a_flat_config_json_from_before_the_groups_reads_into_them():
 def test_a_config_json_with_unknown_or_missing_settings_is_refused(data, message):
     with pytest.raises(ValueError, match=message):
         TrainConfig.from_json(data)
+
+
+def test_a_config_json_from_before_adam_eps_and_the_dqn_loss_reads_what_it_was_trained_with():
+    for algo, task in (("dqn", "DiscreteArrows-v0"), ("sac", "ContinuousArrows-v0")):
+        stored = TrainConfig(task=f"tactile_braille/{task}", algo=algo).to_json()
+        stored["agent"] = {k: v for k, v in stored["agent"].items() if k not in ("adam_eps", "loss")}
+        old = TrainConfig.from_json(stored)
+        assert old.agent.adam_eps == 1e-8  # torch's default, which every run used before the setting
+        if algo == "dqn":
+            assert old.agent.loss == "huber"
+        assert (
+            TrainConfig.from_json(
+                TrainConfig(task=f"tactile_braille/{task}", algo=algo).to_json()
+            ).agent.adam_eps
+            == 1e-4
+        )

@@ -473,6 +473,8 @@ class TrainConfig:
         if "algo" not in data:
             raise ValueError("the settings name no algorithm ('algo')")
         _refuse_unknown(cls, data)
+        if isinstance(data.get("agent"), dict):  # written before these settings: what it was trained with
+            data["agent"] = {**_LEGACY_AGENT.get(data["algo"], {}), **data["agent"]}
         if "track" not in data:  # written before tracks: the track its settings need
             config = cls(**{**data, "track": "proprio"})
             return replace_settings(config, {"track": "proprio" if proprio_settings(config) else "tactile"})
@@ -513,6 +515,15 @@ _LEGACY_NAMES = {
     "snapshots": ("evaluation", "snapshots"),
 }
 """Flat settings of config.json files written before the groups, and where they live now."""
+
+
+_LEGACY_AGENT = {
+    "dqn": {"adam_eps": 1e-8, "loss": "huber"},
+    "sac_discrete": {"adam_eps": 1e-8},
+    "sac": {"adam_eps": 1e-8},
+    "td3": {"adam_eps": 1e-8},
+}
+"""What runs written before a setting existed were trained with, where that differs from its default."""
 
 
 def _ungroup_legacy(data: dict) -> dict:

@@ -135,8 +135,11 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
         raise ValueError(f"unknown preset {name!r}; choose one of {PRESETS}")
     if algo not in AGENT_CONFIGS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {tuple(AGENT_CONFIGS)}")
+    changes = paper_changes(task, algo)
+    if name == "fast":  # fast keeps the noise it was made with, in the actions' [-1, 1] units
+        changes.pop("agent", None)
     config = replace_settings(
-        TrainConfig(task=task, algo=algo, preset=name, track=PRESET_TRACKS[name]), paper_changes(task, algo)
+        TrainConfig(task=task, algo=algo, preset=name, track=PRESET_TRACKS[name]), changes
     )
     if name == "released":
         config = replace_settings(config, RELEASED_CHANGES[algo])

@@ -142,7 +142,8 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
         last_epoch = int(rows[-1]["epoch"]) if rows else -1
         if typing is not None and typing.get("checkpoint_epoch") != last_epoch:
             typing = None  # evaluated before the run went on: stale
-        if typing is not None and "released_protocol" not in typing and (run_dir / "checkpoint.pt").exists():
+        if typing is not None and "released_protocol" not in typing and evaluate_missing \
+                and (run_dir / "checkpoint.pt").exists():  # fmt: skip
             typing = None  # evaluated before the released protocol was: evaluate again
         if typing is None and evaluate_missing and (run_dir / "checkpoint.pt").exists():
             typing = evaluate_typing(run_dir)
