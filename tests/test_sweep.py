@@ -7,6 +7,7 @@ import json
 import pytest
 
 from tactile_braille.agents import read_progress
+from tactile_braille.cli import main
 from tactile_braille.evaluation.report import load_records
 from tactile_braille.sweep import Trial, archive_run, plan, run_trial, sweep
 
@@ -96,6 +97,8 @@ def test_trials_run_side_by_side_and_archived_ones_are_not_run_again(env_dataset
     assert not (tmp_path / "machine2" / trials[0].name).exists()
     records = load_records(again, evaluate_missing=False)
     assert [r.typing["checkpoint_epoch"] for r in records] == [0, 0]
+    assert main(["report", *map(str, again), "--output", str(tmp_path / "report")]) == 0
+    assert "| disc arrow | DQN (paper, fp32," in (tmp_path / "report" / "results.md").read_text()
     # More epochs than archived: the trial runs (here from scratch, its checkpoint being elsewhere).
     longer = plan(["DiscreteArrows-v0"], ["dqn"], [0], dataset=dataset, **{**TINY, "epochs": 2})
     [run] = sweep(longer, tmp_path / "machine2", use_ray=False, progress=False, archive=archive)

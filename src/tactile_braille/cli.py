@@ -306,6 +306,8 @@ def _report(args: argparse.Namespace) -> int:
     from tactile_braille.agents.report import write_report
 
     for run in args.runs:
+        if args.output is not None and not (run / "checkpoint.pt").exists():
+            continue  # an archived record (no checkpoint to evaluate): the report over runs reads it
         report = write_report(run, episodes=args.episodes)
         print(report.read_text())
         print(f"wrote {report} and {report.parent / 'curve.png'}")
