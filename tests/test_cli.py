@@ -105,3 +105,27 @@ def test_cli_train_argument_errors(argv, message, tmp_path, monkeypatch, capsys)
     captured = capsys.readouterr()
     assert "error" in captured.err and message in captured.err
     assert not (tmp_path / "runs").exists()
+
+
+def test_benchmark_runs_each_preset_in_its_own_folders_and_refuses_unknown_tasks(
+    tmp_path, monkeypatch, capsys
+):
+    calls = []
+    monkeypatch.setattr(
+        cli, "_run_sweep", lambda args, trials: calls.append((args.root, args.archive, trials))
+    )
+    argv = ["benchmark", "--paper", "--presets", "paper", "released", "--tasks", "DiscreteArrows-v0",
+            "--seeds", "3", "4", "--root", str(tmp_path / "runs"),
+            "--archive", str(tmp_path / "results")]  # fmt: skip
+    assert main(argv) == 0
+    assert [(root.name, archive.name) for root, archive, _ in calls] == [
+        ("paper", "paper"),
+        ("released", "released"),
+    ]
+    for _, _, trials in calls:
+        assert {(t.task, t.algo, t.seed) for t in trials} == {
+            ("DiscreteArrows-v0", algo, seed) for algo in ("dqn", "sac_discrete") for seed in (3, 4)
+        }
+    assert [t.preset for t in calls[1][2]] == ["released"] * 4
+    assert main(["benchmark", "--paper", "--tasks", "DiscreteArrow-v0"]) == 2
+    assert "no Table III rows for ['DiscreteArrow-v0']" in capsys.readouterr().err
