@@ -54,7 +54,7 @@ bench: $(STAMP)
 # docs/results.md, generated whole from the runs' records committed under results/ (settings, world,
 # progress and typing of each run; no checkpoints: `tactile-braille benchmark ... --archive results/...`
 # and `tactile-braille archive` write them). Runs on any machine, no training needed.
-RECORDS = $(sort $(dir $(wildcard results/*/*/*/config.json)))
+RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json))))
 results: $(STAMP)
 	$(TB) report $(RECORDS) --output docs/results.md \
 		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
