@@ -296,7 +296,7 @@ def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str |
             ax.plot(original[0][shown] + 1, original[1][shown], color="black", lw=1, ls=":",
                     label="original release (sim, seed 1)")  # fmt: skip
         paper = PAPER_TABLE.get(("sim", task, algo))
-        title = f"{task}, {_label(algo, variant)}"
+        title = f"{task}, {_label(algo, variant)}, {records[0].track} track"
         title += f" (paper: converged at epoch {paper[2]})" if paper else ""
         ax.set_title(textwrap.fill(title, 70), fontsize=9)  # ablations' titles name their settings
         ax.set_xlabel("epoch (250 steps)")
