@@ -170,13 +170,15 @@ def archived(trial: Trial, archive: str | Path | None) -> Path | None:
     if archive is None:
         return None
     record = Path(archive) / trial.name
-    if not (record / "config.json").exists() or not (record / "typing.json").exists():
+    if not (record / "config.json").exists():
         return None
     wanted = trial.config()
     other = record_differences(record, wanted)
-    if other:
+    if other:  # refused before any work, not when the trial's record is written
         raise ValueError(f"{record} holds the record of a run with other settings ({', '.join(other)}); "
                          "use another --archive")  # fmt: skip
+    if not (record / "typing.json").exists():
+        return None
     epochs = len(read_progress(record))
     typed = json.loads((record / "typing.json").read_text()).get("checkpoint_epoch")
     return record if epochs >= wanted.epochs and typed == epochs - 1 else None
