@@ -484,18 +484,14 @@ class TrainConfig:
 def proprio_settings(config: TrainConfig) -> dict[str, str]:
     """The settings of ``config`` that use what only a calibrated robot knows (the ``proprio`` track),
     each with what it uses."""
-    uses = {
-        "touch.enabled": "labels every frame with the arm's pose and the keys the calibrated layout "
-        "places there",
-        "touch.goal_positions": "places the goal on the calibrated key layout",
-        "agent.critic_pose": "shows the critics the arm's pose",
-    }
-    active = {
-        "touch.enabled": config.touch.enabled,
-        "touch.goal_positions": config.touch.goal_positions,
-        "agent.critic_pose": getattr(config.agent, "critic_pose", False),
-    }
-    return {name: why for name, why in uses.items() if active[name]}
+    uses = (
+        ("touch.enabled", config.touch.enabled,
+         "labels every frame with the arm's pose and the keys the calibrated layout places there"),
+        ("touch.goal_positions", config.touch.goal_positions, "places the goal on the calibrated key layout"),
+        ("agent.critic_pose", getattr(config.agent, "critic_pose", False),
+         "shows the critics the arm's pose"),
+    )  # fmt: skip
+    return {name: why for name, used, why in uses if used}
 
 
 GROUPS: dict[str, type] = {"replay": ReplayConfig, "touch": TouchConfig, "evaluation": EvaluationConfig}
@@ -518,10 +514,7 @@ _LEGACY_NAMES = {
 
 
 _LEGACY_AGENT = {
-    "dqn": {"adam_eps": 1e-8, "loss": "huber"},
-    "sac_discrete": {"adam_eps": 1e-8},
-    "sac": {"adam_eps": 1e-8},
-    "td3": {"adam_eps": 1e-8},
+    algo: {"adam_eps": 1e-8, **({"loss": "huber"} if algo == "dqn" else {})} for algo in AGENT_CONFIGS
 }
 """What runs written before a setting existed were trained with, where that differs from its default."""
 
