@@ -54,10 +54,15 @@ bench: $(STAMP)
 # docs/results.md, generated whole from the runs' records committed under results/ (settings, world,
 # progress and typing of each run; no checkpoints: `tactile-braille benchmark ... --archive results/...`
 # and `tactile-braille archive` write them). Runs on any machine, no training needed.
+# docs/leaderboard.md ranks those records and the results files of other libraries' agents
+# (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md).
 RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json))))
+RESULT_FILES = $(sort $(wildcard results/leaderboard/*/*.json))
 results: $(STAMP)
 	$(TB) report $(RECORDS) --output docs/results.md \
 		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
+	$(TB) leaderboard $(RECORDS) $(RESULT_FILES) --output docs/leaderboard.md \
+		--title "Leaderboard: typing on the braille keyboard"
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

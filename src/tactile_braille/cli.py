@@ -323,16 +323,79 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from tactile_braille.evaluation import evaluate_typing
+    if args.policy is not None:
+        return _evaluate_policy(args)
+    from tactile_braille.evaluation.runs import RESULT_FILE, evaluate_typing
 
-    for run in args.runs:
+    for flag in ("method", "output", "train_seed", "env_steps", "epochs", "track", "dataset"):
+        if getattr(args, flag) is not None:
+            raise ValueError(
+                f"--{flag.replace('_', '-')} is for --policy; a run's results file takes its own"
+            )
+    for run in args.targets:
+        if not (run / "config.json").exists():
+            raise ValueError(
+                f"{run} is not a training run (no config.json); to score a callable, use --policy"
+            )
         result = evaluate_typing(run, sentences=not args.no_sentences, seed=args.seed)
         print(f"{run}: typing accuracy {result['accuracy']:.3f} over {result['keys_asked']} keys "
               f"({result['sequences']} sequences), {result['total_steps']} steps")  # fmt: skip
         for sentence in result.get("sentences", []):
             score = f"({sentence['accuracy']:.0%}, {sentence['steps']} steps)"
             print(f"  {sentence['text']}\n  {sentence['typed']}  {score}")
-        print(f"wrote {run / 'typing.json'} and {run / 'typing_confusion.png'}")
+        print(f"wrote {run / 'typing.json'}, {run / RESULT_FILE} and {run / 'typing_confusion.png'}")
+    return 0
+
+
+def _evaluate_policy(args: argparse.Namespace) -> int:
+    """``evaluate --policy MODULE:NAME TASK``: score a user's callable and write its results file."""
+    from tactile_braille.evaluation.results import make_result, write_result
+    from tactile_braille.evaluation.scoring import evaluate_policy, load_policy
+
+    if len(args.targets) != 1:
+        raise ValueError(f"--policy scores one TASK, got {len(args.targets)} targets")
+    if args.method is None or args.output is None:
+        raise ValueError("--policy needs --method NAME (free text) and --output FILE.json")
+    if args.output.exists() and not args.overwrite:
+        raise FileExistsError(f"{args.output} exists; choose another name or pass --overwrite")
+    if args.output.is_dir():
+        raise ValueError(f"--output {args.output} is a folder; name the results file (e.g. result.json)")
+    policy = load_policy(args.policy)
+    report = evaluate_policy(
+        policy, str(args.targets[0]), protocol=args.protocol, backend=args.backend, seed=args.seed,
+        track=args.track or "tactile", dataset=args.dataset, sentences=not args.no_sentences,
+    )  # fmt: skip
+    result = make_result(report, method=args.method, seed=args.train_seed, env_steps=args.env_steps,
+                         epochs=args.epochs)  # fmt: skip
+    path = write_result(result, args.output, overwrite=args.overwrite)
+    print(f"{args.method} on {report.task} ({report.track} track, {report.protocol} protocol): "
+          f"typing accuracy {report.accuracy:.3f} over {report.keys_asked} keys, {report.total_steps} steps; "
+          f"fingerprint {report.fingerprint[:12]}")  # fmt: skip
+    print(f"wrote {path}")
+    return 0
+
+
+def _leaderboard(args: argparse.Namespace) -> int:
+    from tactile_braille._io import atomic_path
+    from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
+
+    reference = {}
+    for item in args.reference:
+        task, _, fingerprint = item.partition("=")
+        if not fingerprint:
+            raise ValueError(f"--reference takes TASK=FINGERPRINT, got {item!r}")
+        reference[task] = fingerprint
+    if args.output is not None and args.output.is_dir():
+        raise ValueError(f"--output {args.output} is a folder; name the page to write (e.g. leaderboard.md)")
+    page = leaderboard_markdown(load_results(args.results), title=args.title, reference=reference,
+                                strict=args.strict)  # fmt: skip
+    if args.output is None:
+        print(page)
+        return 0
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(args.output) as temporary:
+        temporary.write_text(page)
+    print(f"wrote {args.output} ({len(args.results)} results)")
     return 0
 
 
@@ -507,12 +570,68 @@ def _add_report_command(commands) -> None:
 
 
 def _add_evaluate_command(commands) -> None:
-    """The ``evaluate`` command."""
-    evaluate = commands.add_parser("evaluate", help="the paper's typing evaluation of a training run")
-    evaluate.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
+    """The ``evaluate`` command: our runs, or any callable with ``--policy``."""
+    evaluate = commands.add_parser(
+        "evaluate", help="the paper's typing evaluation of training runs, or of any policy (--policy)",
+        description="Score RUN_DIRs (writes typing.json and result.json in each), or, with --policy "
+        "MODULE:NAME, the callable NAME (observation dict -> action) on TASK (writes --output).",
+    )  # fmt: skip
+    evaluate.add_argument("targets", nargs="+", type=Path, metavar="RUN_DIR|TASK")
+    evaluate.add_argument(
+        "--policy", metavar="MODULE:NAME", help="a callable to score: module or file.py, name"
+    )
+    evaluate.add_argument("--method", help="--policy: the method's name on the leaderboard (free text)")
+    evaluate.add_argument("--output", type=Path, help="--policy: the results file to write (JSON)")
+    evaluate.add_argument("--overwrite", action="store_true", help="--policy: replace an existing --output")
+    evaluate.add_argument(
+        "--track",
+        choices=("tactile", "proprio"),
+        help="--policy: what the policy learnt from (docs/benchmark.md; default tactile)",
+    )
+    evaluate.add_argument(
+        "--protocol",
+        choices=("paper", "released"),
+        default="paper",
+        help="--policy: no reset between keys (paper) or a reset per key (released)",
+    )
+    evaluate.add_argument(
+        "--backend", choices=BACKENDS, default="dataset", help="--policy: observations' source"
+    )
+    evaluate.add_argument(
+        "--dataset", type=Path, help="--policy: the dataset backend's file (default: cached)"
+    )
+    evaluate.add_argument("--train-seed", type=_non_negative, help="--policy: the training seed, recorded")
+    evaluate.add_argument(
+        "--env-steps", type=_non_negative, help="--policy: environment steps trained, recorded"
+    )
+    evaluate.add_argument(
+        "--epochs", type=_non_negative, help="--policy: epochs (250 steps) trained, recorded"
+    )
     evaluate.add_argument("--no-sentences", action="store_true", help="alphabet tasks: skip the sentences")
-    evaluate.add_argument("--seed", type=int, default=0, help="seed of the start poses")
+    evaluate.add_argument(
+        "--seed", type=int, default=0, help="seed of the start poses (part of the fingerprint)"
+    )
     evaluate.set_defaults(handler=_evaluate)
+    board = commands.add_parser("leaderboard", help="rank results files per task and track (a markdown page)")
+    board.add_argument("results", nargs="+", type=Path, metavar="RESULT", help="results files or run folders")
+    board.add_argument("--output", type=Path, help="the page to write (default: print it)")
+    board.add_argument("--title", default="Leaderboard")
+    board.add_argument(
+        "--reference",
+        action="append",
+        default=[],
+        metavar="TASK=FINGERPRINT",
+        help="rank TASK's results under this fingerprint (default: the one most results hold)",
+    )
+    board.add_argument("--strict", action="store_true", help="refuse results under other conditions")
+    board.set_defaults(handler=_leaderboard)
+
+
+def _non_negative(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
+    return value
 
 
 def _add_sweep_command(commands) -> None:

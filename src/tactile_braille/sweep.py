@@ -136,7 +136,7 @@ def record_differences(record: Path, config) -> list[str]:
 def archive_run(run_dir: str | Path, into: str | Path) -> Path:
     """Copy a run's record to ``into/<run folder name>`` (replacing an older copy), after evaluating
     its typing on its last checkpoint where that is not done yet; returns the copy's folder."""
-    from tactile_braille.evaluation.protocol import evaluate_typing
+    from tactile_braille.evaluation.runs import evaluate_typing
 
     run_dir = Path(run_dir)
     config = read_config(run_dir)  # refuses a folder that holds no run

@@ -52,7 +52,8 @@ from tactile_braille.agents.replay import FRAME_LABELS, PACKED_BYTES
 from tactile_braille.agents.report import evaluate_run, load_run
 from tactile_braille.agents.run import setting_differences
 from tactile_braille.agents.touch import TouchAgent
-from tactile_braille.evaluation.protocol import evaluate_typing
+from tactile_braille.evaluation.results import read_result
+from tactile_braille.evaluation.runs import LEGACY_VERSION, RESULT_FILE, evaluate_typing, run_result
 from tactile_braille.keyboard.layout import ARROW_KEYS, KeyboardLayout
 from tactile_braille.supervised.touch import KeyLocator, TouchEncoder, TouchEncoderConfig, fit_touch_encoder
 
@@ -694,6 +695,20 @@ def test_report_and_typing_evaluate_a_touch_run_on_images(touch_runs, algo):
     assert typing["keys_asked"] == 96 and 0.0 <= typing["accuracy"] <= 1.0
     assert 96 <= typing["total_steps"] <= 96 * env.spec.max_episode_steps
     assert (run / "typing.json").exists()
+    # The benchmark's results file: the same report, in the run's track, under its fingerprint.
+    result = read_result(run / RESULT_FILE)
+    assert result["track"] == "proprio" and result["fingerprint"] == typing["fingerprint"]
+    assert result["report"]["accuracy"] == typing["accuracy"] and result["budget"]["epochs"] == 1
+    # A record archived before results files existed gets its results file made from typing.json.
+    (run / RESULT_FILE).unlink()
+    derived = run_result(run)
+    assert derived["report"]["conditions"] == {
+        **result["report"]["conditions"],
+        "project_version": LEGACY_VERSION,
+    }
+    assert {k: derived["report"][k] for k in ("accuracy", "total_steps", "confusion", "touch_optimum")} == {
+        k: result["report"][k] for k in ("accuracy", "total_steps", "confusion", "touch_optimum")
+    }
 
 
 # ---------------------------------------------------------------- asymmetric critics, placed goals, readout

@@ -105,7 +105,7 @@ def record_world(run_dir: Path, env, resume: bool) -> None:
     if path.exists():
         stored = json.loads(path.read_text())
         stored.pop("dataset", None)  # where the dataset lies may change; what it holds may not
-        differ = _json_differences(stored, {k: v for k, v in world.items() if k != "dataset"})
+        differ = json_differences(stored, {k: v for k, v in world.items() if k != "dataset"})
         if differ:
             shown = "; ".join(differ[:3]) + (f"; and {len(differ) - 3} more" if len(differ) > 3 else "")
             raise ValueError(
@@ -119,13 +119,13 @@ def record_world(run_dir: Path, env, resume: bool) -> None:
         temporary.write_text(json.dumps(world, indent=2, sort_keys=True))
 
 
-def _json_differences(stored, now, path: str = "") -> list[str]:
+def json_differences(stored, now, path: str = "") -> list[str]:
     """``path: stored -> now`` for each leaf in which two JSON values differ."""
     if isinstance(stored, dict) and isinstance(now, dict):
         return [
             line
             for key in sorted(set(stored) | set(now))
-            for line in _json_differences(stored.get(key), now.get(key), f"{path}.{key}" if path else key)
+            for line in json_differences(stored.get(key), now.get(key), f"{path}.{key}" if path else key)
         ]
     return [] if stored == now else [f"{path or 'world'}: {json.dumps(stored)} -> {json.dumps(now)}"]
 

@@ -32,7 +32,6 @@ import gymnasium as gym
 import numpy as np
 
 from tactile_braille.agents.rollout import run_episode
-from tactile_braille.envs.registry import task_name, task_of
 from tactile_braille.keyboard.layout import ALPHABET_KEYS, ARROW_KEYS
 
 OTHER, NONE = "OTHER", "NONE"
@@ -150,69 +149,3 @@ def type_sequences(
         result.typed.append(typed)
         result.steps.append(steps)
     return result
-
-
-def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
-    """The paper's typing evaluation of a run's last checkpoint, written to ``RUN_DIR/typing.json``.
-
-    Also writes ``typing_confusion.png``. For the alphabet tasks, ``sentences``
-    adds the typing of :data:`SENTENCES`.
-    """
-    import json
-    from pathlib import Path
-
-    from tactile_braille._io import atomic_path
-    from tactile_braille.agents.report import load_run
-
-    run_dir = Path(run_dir)
-    config, env, agent = load_run(run_dir)
-    keys = task_of(config.task).keys
-    result = type_sequences(agent, env, paper_sequences(keys), seed=seed)
-    import torch
-
-    epoch = int(torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")["epoch"])
-    output = {"task": config.task, "algo": config.algo, "seed": config.seed, "checkpoint_epoch": epoch,
-              **result.summary()}  # fmt: skip
-    output["confusion"] = {"rows": list(result.keys), "columns": list(result.columns),
-                           "counts": result.confusion().tolist()}  # fmt: skip
-    released = type_sequences(agent, env, paper_sequences(keys), seed=seed, protocol="released")
-    output["released_protocol"] = released.summary()
-    if keys == "alphabet" and sentences:
-        typed = type_sequences(agent, env, [text_keys(s) for s in SENTENCES], seed=seed + 1_000)
-        output["sentences"] = [
-            {"text": text, "typed": _as_text(keys_typed),
-             "accuracy": float(np.mean([a == b for a, b in zip(text_keys(text), keys_typed, strict=True)])),
-             "steps": int(sum(steps))}
-            for text, keys_typed, steps in zip(SENTENCES, typed.typed, typed.steps, strict=True)
-        ]  # fmt: skip
-    save_typing_confusion(result.confusion(), result.keys, result.columns, run_dir / "typing_confusion.png",
-                          f"{task_name(config.task)}, {config.algo}: accuracy {result.accuracy:.3f}, "
-                          f"{result.total_steps} steps")  # fmt: skip
-    with atomic_path(run_dir / "typing.json") as temporary:
-        temporary.write_text(json.dumps(output, indent=2))
-    return output
-
-
-def _as_text(keys: list[str]) -> str:
-    """Typed keys as text: SPACE as a space, a wrong key outside the task or a time-out as ``_``."""
-    return "".join(" " if k == "SPACE" else k if len(k) == 1 else "_" for k in keys)
-
-
-def save_typing_confusion(matrix: np.ndarray, keys, columns, path, title: str):
-    """The typing confusion matrix as a PNG (rows: goal key; columns: key pressed, OTHER, NONE)."""
-    from tactile_braille._figures import new_figure, save_figure
-
-    size = 2.5 + 0.28 * len(columns)
-    fig, axes = new_figure(figsize=(size, size * 0.9))
-    ax = axes[0, 0]
-    ax.imshow(np.where(matrix > 0, matrix, np.nan), cmap="viridis", interpolation="nearest")
-    ax.set_xticks(range(len(columns)), columns, rotation=90, fontsize=7)
-    ax.set_yticks(range(len(keys)), keys, fontsize=7)
-    ax.set_xlabel("key pressed")
-    ax.set_ylabel("goal key")
-    for i, j in zip(*np.nonzero(matrix), strict=True):
-        ax.text(j, i, str(matrix[i, j]), ha="center", va="center", fontsize=6,
-                color="white" if i != j else "black")  # fmt: skip
-    ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    return save_figure(fig, path)

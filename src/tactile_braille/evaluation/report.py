@@ -129,7 +129,7 @@ class RunRecord:
 
 def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
     """Read runs (and their typing evaluations, running them where missing)."""
-    from tactile_braille.evaluation.protocol import evaluate_typing
+    from tactile_braille.evaluation.runs import evaluate_typing
 
     records = []
     for run_dir in map(Path, run_dirs):
@@ -378,7 +378,7 @@ def write_report(
         notes: Markdown placed after the table (a reading of the results).
         command: the command that made the report, quoted in it.
     """
-    from tactile_braille.evaluation.protocol import save_typing_confusion
+    from tactile_braille.evaluation.runs import save_typing_confusion
 
     output = Path(output)
     if output.suffix == ".md":

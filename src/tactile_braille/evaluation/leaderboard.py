@@ -1,0 +1,184 @@
+"""The leaderboard: results files ranked per task and track, beside the paper's Table III.
+
+``tactile-braille leaderboard RESULTS... --output docs/leaderboard.md``.
+RESULTS are results files (docs/benchmark.md) or run folders and archived
+records (their ``result.json``, or one made from their typing evaluation).
+Per task, results are grouped by method, track and fingerprint (their seeds
+averaged), and ranked by typing accuracy, then by typing steps. A task's
+reference fingerprint is the one most of its results hold (or the one
+given); results under other conditions are listed apart with what differs,
+never ranked with the rest (or refused, with ``strict``).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tactile_braille.agents.run import json_differences
+from tactile_braille.evaluation.report import PAPER_TABLE, TASK_NAMES, TRACK_TITLES
+from tactile_braille.evaluation.results import read_result
+
+PAPER_METHOD = "Church et al. 2020, Table III (sim)"
+
+
+def load_results(paths) -> list[tuple[str, dict]]:
+    """(where, result) for each results file or run folder in ``paths``."""
+    from tactile_braille.evaluation.runs import run_result
+
+    loaded = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            if not (path / "config.json").exists():
+                raise ValueError(f"{path} is a folder but not a run or a record (no config.json)")
+            loaded.append((str(path), run_result(path)))
+        elif path.exists():
+            loaded.append((str(path), read_result(path)))
+        else:
+            raise FileNotFoundError(f"{path} does not exist")
+    return loaded
+
+
+@dataclass
+class Row:
+    """One method's results on one task, over its seeds."""
+
+    method: str
+    track: str
+    fingerprint: str
+    accuracy: list[float]
+    steps: list[float]
+    env_steps: list[int | None]
+    optimum: float | None = None
+    paper: bool = False
+
+    def rank_key(self) -> tuple[float, float]:
+        return -float(np.mean(self.accuracy)), float(np.mean(self.steps))
+
+
+def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
+    """Rows per task: results grouped by (method, track, fingerprint); one seed once per row."""
+    rows: dict[tuple, Row] = {}
+    seeds: dict[tuple, dict] = {}
+    for where, result in results:
+        key = (result["task"], result["method"], result["track"], result["fingerprint"])
+        report = result["report"]
+        if key not in rows:
+            rows[key] = Row(result["method"], result["track"], result["fingerprint"], [], [], [],
+                            report.get("touch_optimum"))  # fmt: skip
+        taken = seeds.setdefault(key, {})
+        if result["seed"] is not None and result["seed"] in taken:
+            raise ValueError(f"{where} repeats seed {result['seed']} of {taken[result['seed']]} "
+                             f"({result['method']}, {result['task']})")  # fmt: skip
+        taken[result["seed"]] = where
+        rows[key].accuracy.append(report["accuracy"])
+        rows[key].steps.append(report["total_steps"])
+        rows[key].env_steps.append(result["budget"].get("env_steps"))
+    per_task: dict[str, list[Row]] = {}
+    for (task, *_), row in rows.items():
+        per_task.setdefault(task, []).append(row)
+    return per_task
+
+
+def _conditions(results, task: str) -> dict[str, dict]:
+    return {r["fingerprint"]: r["report"]["conditions"] for _, r in results if r["task"] == task}
+
+
+def leaderboard_markdown(
+    results: list[tuple[str, dict]],
+    title: str = "Leaderboard",
+    reference: dict[str, str] | None = None,
+    strict: bool = False,
+) -> str:
+    """The leaderboard page (the module docstring). ``reference``: task -> fingerprint to rank under."""
+    per_task = _rows(results)
+    order = [*TASK_NAMES, *sorted(set(per_task) - set(TASK_NAMES))]
+    lines = [f"# {title}", "", _INTRO, ""]
+    for task in (t for t in order if t in per_task):
+        counts = Counter(f for _, r in results if r["task"] == task for f in [r["fingerprint"]])
+        chosen = (reference or {}).get(task) or min(counts, key=lambda f: (-counts[f], f))
+        apart = [row for row in per_task[task] if row.fingerprint != chosen]
+        if strict and apart:
+            where = next(w for w, r in results if r["task"] == task and r["fingerprint"] != chosen)
+            raise ValueError(
+                f"{where} was scored under other conditions (fingerprint {apart[0].fingerprint[:12]}) "
+                f"than {task}'s reference {chosen[:12]}"
+            )
+        ranked = [row for row in per_task[task] if row.fingerprint == chosen] + _paper_rows(task)
+        conditions = _conditions(results, task)
+        lines += [f"## {task}", "", _describe(conditions[chosen], chosen), ""]
+        for track in sorted({r.track for r in ranked}, key=lambda t: (t != "tactile", t)):
+            lines += [f"### {TRACK_TITLES.get(track, track)}", "", *_table(
+                sorted((r for r in ranked if r.track == track), key=Row.rank_key)), ""]  # fmt: skip
+        if apart:
+            lines += ["### Under other conditions (not ranked with the above)", "",
+                      "| method | track | seeds | accuracy | steps | fingerprint "
+                      "| differs from the reference in |",
+                      "|---|---|---|---|---|---|---|"]  # fmt: skip
+            for row in sorted(apart, key=Row.rank_key):
+                differ = "; ".join(
+                    _short(line)
+                    for line in json_differences(conditions[chosen], conditions[row.fingerprint])[:3]
+                )
+                lines.append(f"| {row.method} | {row.track} | {len(row.accuracy)} | {_mean(row.accuracy, 3)} "
+                             f"| {_mean(row.steps, 0)} | `{row.fingerprint[:12]}` | {differ} |")  # fmt: skip
+            lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+_INTRO = (
+    "Generated by `tactile-braille leaderboard` from the results files under `results/` (`make results`); "
+    "the format and how to add your agent: [benchmark.md](benchmark.md). Each row is a method's mean over "
+    "its training seeds (range in brackets), typing the paper's sequences under the paper's protocol "
+    "(no reset between keys), ranked by accuracy, then by steps. *Touch-only optimum*: the fewest steps "
+    "any policy that knows only what it has felt can expect (discrete tasks; a lower bound under this "
+    "protocol). The paper's rows are its reported figures: its exact conditions cannot be fingerprinted, "
+    "and its steps were most likely counted with a reset per key (docs/evaluation.md)."
+)
+
+
+def _paper_rows(task: str) -> list[Row]:
+    return [
+        Row(f"{PAPER_METHOD}: {algo.upper().replace('SAC_DISCRETE', 'SAC_DISC')}", "tactile", "",
+            [accuracy], [steps], [None], paper=True)
+        for (platform, name, algo), (steps, accuracy, _) in PAPER_TABLE.items()
+        if platform == "sim" and name == task
+    ]  # fmt: skip
+
+
+def _table(rows: list[Row]) -> list[str]:
+    lines = ["| rank | method | seeds | accuracy | steps | touch-only optimum | env steps trained |",
+             "|---|---|---|---|---|---|---|"]  # fmt: skip
+    rank = 0
+    for row in rows:
+        rank += not row.paper
+        budget = [b for b in row.env_steps if b is not None]
+        lines.append(
+            f"| {'-' if row.paper else rank} | {row.method} | {'-' if row.paper else len(row.accuracy)} "
+            f"| {_mean(row.accuracy, 3)} | {_mean(row.steps, 0)} "
+            f"| {'-' if row.optimum is None else f'{row.optimum:.0f}'} "
+            f"| {f'{np.mean(budget):,.0f}' if budget else '-'} |"
+        )
+    return lines
+
+
+def _mean(values, digits: int) -> str:
+    text = f"{np.mean(values):.{digits}f}"
+    return text if len(values) == 1 else f"{text} [{min(values):.{digits}f}, {max(values):.{digits}f}]"
+
+
+def _describe(conditions: dict, chosen: str) -> str:
+    world = conditions["world"]
+    return (f"Reference conditions `{chosen[:12]}`: protocol `{conditions['protocol']}`, "
+            f"{len(conditions['sequences'])} sequences, "
+            f"{conditions['max_episode_steps']} steps per key at most, "
+            f"start seed {conditions['start_seed']}, backend `{world.get('backend')}`, world "
+            f"{world.get('generator_version', world.get('rig'))}, tactile_braille "
+            f"{conditions['project_version']}.")  # fmt: skip
+
+
+def _short(line: str, width: int = 60) -> str:
+    return line if len(line) <= width else line[: width - 3] + "..."

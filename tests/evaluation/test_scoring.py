@@ -1,0 +1,257 @@
+"""Scoring any agent: evaluate_policy on callables, its fingerprint, results files and the leaderboard."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import tactile_braille  # noqa: F401 - registers the environments
+from tactile_braille.cli import main
+from tactile_braille.envs.oracle import oracle_action
+from tactile_braille.envs.tasks import DISCRETE_ACTIONS
+from tactile_braille.evaluation import PolicyError, TypingReport, evaluate_policy, scoring, touch_optimum
+from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
+from tactile_braille.evaluation.protocol import paper_sequences
+from tactile_braille.evaluation.results import make_result, read_result, write_result
+
+ARROWS = "tactile_braille/DiscreteArrows-v0"
+CONTINUOUS = "tactile_braille/ContinuousArrows-v0"
+PRESS = DISCRETE_ACTIONS.index("PRESS")
+
+
+@pytest.fixture
+def arrows(env_datasets):
+    return gym.make(ARROWS, dataset=env_datasets[ARROWS])
+
+
+@pytest.fixture
+def continuous(env_datasets):
+    return gym.make(CONTINUOUS, dataset=env_datasets[CONTINUOUS])
+
+
+def press(observation):
+    return PRESS
+
+
+def test_a_random_callable_gets_a_full_report(env_datasets):
+    rng = np.random.default_rng(0)
+    report = evaluate_policy(
+        lambda o: int(rng.integers(5)), "DiscreteArrows-v0", dataset=env_datasets[ARROWS]
+    )
+    assert isinstance(report, TypingReport) and report.task == "DiscreteArrows-v0"
+    assert report.keys_asked == 96 and report.sequences == 24 and 0.0 <= report.accuracy <= 1.0
+    assert 96 <= report.total_steps <= 96 * 25
+    assert len(report.fingerprint) == 64 and int(report.fingerprint, 16) >= 0
+    assert np.sum(report.confusion["counts"]) == 96
+    assert report.track == "tactile" and report.protocol == "paper"
+    assert report.touch_optimum == pytest.approx(touch_optimum("arrows", paper_sequences("arrows"), "paper"))
+
+
+def test_a_callable_that_reads_the_pose_types_everything_right(arrows):
+    report = evaluate_policy(lambda observation: oracle_action(arrows), ARROWS, env=arrows)
+    assert report.accuracy == 1.0 and report.confusion["counts"] == [
+        [24 if row == column else 0 for column in range(6)] for row in range(4)
+    ]
+
+
+def test_our_agents_and_a_callable_acting_alike_get_the_same_report(arrows):
+    class Agent:
+        def policy_action(self, observation, step, explore, rng, deterministic=False):
+            assert deterministic and not explore
+            return PRESS
+
+    ours, theirs = evaluate_policy(Agent(), ARROWS, env=arrows), evaluate_policy(press, ARROWS, env=arrows)
+    assert ours.to_dict() == theirs.to_dict()
+
+
+@pytest.mark.parametrize(
+    "action",
+    [np.int64(PRESS), np.array(PRESS), np.array([PRESS]), torch.tensor(PRESS), torch.tensor([PRESS])],
+    ids=["numpy-int", "0-d array (SB3 predict)", "array of one", "tensor", "tensor of one"],
+)
+def test_integer_actions_in_any_array_form_are_taken(arrows, action):
+    report = evaluate_policy(lambda o: action, ARROWS, env=arrows)
+    assert report.to_dict() == evaluate_policy(press, ARROWS, env=arrows).to_dict()
+
+
+@pytest.mark.parametrize(
+    ("task", "action", "message"),
+    [
+        (ARROWS, 1.0, "takes one integer"),
+        (ARROWS, np.array([1, 2]), "shape (2,)"),
+        (ARROWS, 7, "outside DiscreteArrows-v0's Discrete(5)"),
+        (ARROWS, "PRESS", "takes one integer"),
+        (CONTINUOUS, np.zeros(2, np.float32), "float array of shape (3,)"),
+        (CONTINUOUS, np.zeros((1, 3), np.float32), "float array of shape (3,)"),
+        (CONTINUOUS, np.zeros(3, np.int64), "float array of shape (3,)"),
+        (CONTINUOUS, np.array([0.0, np.nan, 0.0]), "non-finite"),
+        (CONTINUOUS, np.array([0.0, 1.5, 0.0]), "outside ContinuousArrows-v0's action space"),
+        (CONTINUOUS, None, "for ContinuousArrows-v0"),
+    ],
+)
+def test_bad_actions_are_refused_with_what_is_wrong(arrows, continuous, task, action, message):
+    env = arrows if task == ARROWS else continuous
+    with pytest.raises(PolicyError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        evaluate_policy(lambda o: action, task, env=env)
+
+
+def test_bad_settings_are_refused(arrows):
+    with pytest.raises(ValueError, match="unknown task 'Typing-v0'; choose one of"):
+        evaluate_policy(press, "Typing-v0")
+    with pytest.raises(ValueError, match="protocol must be one of"):
+        evaluate_policy(press, ARROWS, env=arrows, protocol="fast")
+    with pytest.raises(ValueError, match="track must be one of"):
+        evaluate_policy(press, ARROWS, env=arrows, track="vision")
+    with pytest.raises(TypeError, match="must be callable"):
+        evaluate_policy(3, ARROWS, env=arrows)
+    with pytest.raises(ValueError, match="the environment is tactile_braille/DiscreteArrows-v0, not"):
+        evaluate_policy(press, "ContinuousArrows-v0", env=arrows)
+
+
+def test_the_fingerprint_changes_with_what_decides_the_score(arrows, monkeypatch):
+    base = evaluate_policy(press, ARROWS, env=arrows)
+    assert evaluate_policy(press, ARROWS, env=arrows).fingerprint == base.fingerprint
+    # Everything that decides the score moves it: the start seed, the protocol, the episode limit...
+    assert evaluate_policy(press, ARROWS, env=arrows, seed=1).fingerprint != base.fingerprint
+    assert evaluate_policy(press, ARROWS, env=arrows, protocol="released").fingerprint != base.fingerprint
+    shorter = gym.make(ARROWS, dataset=arrows.unwrapped.world["dataset"], max_episode_steps=10)
+    assert evaluate_policy(press, ARROWS, env=shorter).fingerprint != base.fingerprint
+    # ... the project's version ...
+    monkeypatch.setattr(scoring, "__version__", "9.9.9")
+    assert evaluate_policy(press, ARROWS, env=arrows).fingerprint != base.fingerprint
+    monkeypatch.undo()
+    # ... and the world: a sensor parameter (live renders of two sensors).
+    rendered = {
+        sensor: evaluate_policy(press, ARROWS, env=gym.make(ARROWS, backend="render", sensor=sensor))
+        for sensor in ("braille_331", "tactip_127")
+    }
+    assert len({r.fingerprint for r in rendered.values()} | {base.fingerprint}) == 3
+    # Not where the dataset file lies: a copy elsewhere scores under the same fingerprint.
+    conditions = dict(base.conditions, world={**base.conditions["world"], "dataset": "/elsewhere.h5"})
+    moved = scoring.protocol_conditions(ARROWS, "paper", conditions["sequences"], 25, 0, conditions["world"])
+    assert scoring.fingerprint(moved) == base.fingerprint
+
+
+def test_touch_optimum_has_known_values():
+    # Arrows, a reset per key: from a uniform start cell, 24 x 4 keys (docs/evaluation.md).
+    assert touch_optimum("arrows", paper_sequences("arrows"), "released") == pytest.approx(228.0)
+    assert touch_optimum("arrows", paper_sequences("arrows"), "paper") == pytest.approx(237.0)
+    with pytest.raises(ValueError, match="protocol must be one of"):
+        touch_optimum("arrows", paper_sequences("arrows"), "fast")
+
+
+# ---------------------------------------------------------------- results files
+def _result(arrows, method="press at once", seed=0, **options):
+    return make_result(evaluate_policy(press, ARROWS, env=arrows, **options), method=method, seed=seed,
+                       env_steps=0)  # fmt: skip
+
+
+def test_a_results_file_round_trips_and_refuses_edits(arrows, tmp_path):
+    result = _result(arrows)
+    path = write_result(result, tmp_path / "sub" / "press.json")
+    assert read_result(path) == json.loads(json.dumps(result))
+    with pytest.raises(FileExistsError, match="exists; choose another name"):
+        write_result(result, path)
+    write_result(result, path, overwrite=True)
+    edited = json.loads(path.read_text())
+    edited["report"]["conditions"]["max_episode_steps"] = 50
+    path.write_text(json.dumps(edited))
+    with pytest.raises(ValueError, match="fingerprint does not match the conditions"):
+        read_result(path)
+    path.write_text(json.dumps({"format": "something/else"}))
+    with pytest.raises(ValueError, match="not a results file of format"):
+        read_result(path)
+    path.write_text("{truncated")
+    with pytest.raises(ValueError, match="not a readable results file"):
+        read_result(path)
+    with pytest.raises(ValueError, match="needs a method name"):
+        make_result(evaluate_policy(press, ARROWS, env=arrows), method=" ")
+    with pytest.raises(ValueError, match="env_steps must be a non-negative integer"):
+        make_result(evaluate_policy(press, ARROWS, env=arrows), method="x", env_steps=-1)
+
+
+def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tmp_path):
+    oracle = evaluate_policy(lambda o: oracle_action(arrows), ARROWS, env=arrows)
+    results = [
+        ("a.json", make_result(oracle, method="pose oracle", seed=0, env_steps=0)),
+        ("b.json", _result(arrows, seed=0)),
+        ("c.json", _result(arrows, seed=1)),
+        ("d.json", _result(arrows, method="press, reset per key", protocol="released")),
+    ]
+    page = leaderboard_markdown(results, title="Test board")
+    assert page.startswith("# Test board")
+    ranked = page.split("### Under other conditions")[0]
+    assert ranked.index("| 1 | pose oracle | 1 | 1.000 |") < ranked.index("| 2 | press at once | 2 |")
+    assert "Church et al. 2020, Table III (sim): DQN | - | 1.000 | 230 |" in ranked
+    apart = page.split("### Under other conditions")[1]
+    assert "press, reset per key" in apart and 'protocol: "paper" -> "released"' in apart
+    with pytest.raises(ValueError, match=r"d\.json was scored under other conditions"):
+        leaderboard_markdown(results, strict=True)
+    # With the released protocol as the reference, the others go apart instead.
+    page = leaderboard_markdown(results, reference={"DiscreteArrows-v0": results[3][1]["fingerprint"]})
+    assert "| 1 | press, reset per key |" in page.split("### Under other conditions")[0]
+    with pytest.raises(ValueError, match=r"e\.json repeats seed 0 of b\.json"):
+        leaderboard_markdown([*results, ("e.json", results[1][1])])
+
+
+# ---------------------------------------------------------------- the command
+POLICIES = """
+def press(observation):
+    return 4
+
+def floats(observation):
+    return 0.5
+
+count = 3
+"""
+
+
+def test_cli_scores_a_callable_and_ranks_it(env_datasets, tmp_path, capsys):
+    module = tmp_path / "mine.py"
+    module.write_text(POLICIES)
+    output = tmp_path / "results" / "press.json"
+    argv = ["evaluate", "DiscreteArrows-v0", "--policy", f"{module}:press", "--method", "always press",
+            "--dataset", str(env_datasets[ARROWS]), "--output", str(output), "--env-steps", "0"]  # fmt: skip
+    assert main(argv) == 0
+    assert f"wrote {output}" in capsys.readouterr().out
+    result = read_result(output)
+    assert result["method"] == "always press" and result["budget"] == {"env_steps": 0, "epochs": None}
+    assert main(argv) == 2 and "exists; choose another name or pass --overwrite" in capsys.readouterr().err
+    page = tmp_path / "board.md"
+    assert main(["leaderboard", str(output), "--output", str(page)]) == 0
+    assert "| 1 | always press | 1 |" in page.read_text()
+
+
+@pytest.mark.parametrize(
+    ("policy", "target", "message"),
+    [
+        ("{module}:floats", "DiscreteArrows-v0", "takes one integer"),
+        ("{module}:count", "DiscreteArrows-v0", "is a int, not a callable"),
+        ("{module}:missing", "DiscreteArrows-v0", "has no 'missing'"),
+        ("{module}", "DiscreteArrows-v0", "a policy is MODULE:NAME"),
+        ("no_such_module_here:f", "DiscreteArrows-v0", "cannot import the policy's module"),
+        ("{module}:press", "Typing-v0", "unknown task 'Typing-v0'"),
+    ],
+)
+def test_cli_refuses_bad_policies_in_one_line(env_datasets, tmp_path, capsys, policy, target, message):
+    module = tmp_path / "mine.py"
+    module.write_text(POLICIES)
+    argv = ["evaluate", target, "--policy", policy.format(module=module), "--method", "m",
+            "--dataset", str(env_datasets[ARROWS]), "--output", str(tmp_path / "r.json")]  # fmt: skip
+    assert main(argv) == 2
+    error = capsys.readouterr().err
+    assert message in error and error.count("\n") == 1 and "Traceback" not in error
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_cli_leaderboard_refuses_what_is_not_a_result(tmp_path, capsys):
+    (tmp_path / "other.json").write_text("[]")
+    assert main(["leaderboard", str(tmp_path / "other.json")]) == 2
+    assert "is not a results file of format" in capsys.readouterr().err
+    assert main(["leaderboard", str(tmp_path)]) == 2
+    assert "is a folder but not a run or a record" in capsys.readouterr().err
+    assert load_results([]) == []
