@@ -5,9 +5,15 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import gymnasium as gym
+import numpy as np
 import pytest
 
+from tactile_braille.envs.oracle import oracle_action
 from tactile_braille.evaluation.results import read_result
+from tactile_braille.keyboard.layout import ARROW_KEYS
+
+ARROWS = "tactile_braille/DiscreteArrows-v0"
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -32,3 +38,38 @@ def test_sb3_her_trains_scores_and_writes_a_results_file(env_datasets, tmp_path,
     assert result["report"]["keys_asked"] == 96 and 0.0 <= result["report"]["accuracy"] <= 1.0
     with pytest.raises(SystemExit):  # an existing results file is never overwritten
         _load("sb3_her").main(argv)
+
+
+def test_the_cleanrl_style_script_trains_scores_and_writes_a_results_file(env_datasets, tmp_path):
+    output = tmp_path / "cleanrl.json"
+    argv = ["--task", "DiscreteArrows-v0", "--steps", "60", "--learning-starts", "30", "--batch-size", "8",
+            "--output", str(output), "--dataset", str(env_datasets[ARROWS])]  # fmt: skip
+    assert _load("cleanrl_dqn_her").main(argv) == 0
+    result = read_result(output)
+    assert result["method"] == "CleanRL-style DQN + HER" and result["track"] == "tactile"
+    assert result["budget"]["env_steps"] == 60 and result["report"]["keys_asked"] == 96
+
+
+def test_the_cleanrl_replay_relabels_with_the_key_an_episode_ended_on(env_datasets):
+    env = gym.make(ARROWS, dataset=env_datasets[ARROWS])
+    replay = _load("cleanrl_dqn_her").EpisodeReplay(env, 30)
+    up, down = (np.eye(4, dtype=np.float32)[ARROW_KEYS.index(k)] for k in ("UP", "DOWN"))
+    # An episode that wanted UP but ended on DOWN (the pose oracle drives to DOWN).
+    observation, _ = env.reset(seed=0, options={"goal_key": "DOWN"})
+    terminated = False
+    while not terminated:
+        action = oracle_action(env)
+        following, _, terminated, truncated, _ = env.step(action)
+        replay.add({**observation, "desired_goal": up}, action, following, terminated)
+        observation = following
+        assert not truncated
+    replay.end_episode()
+    np.testing.assert_array_equal(replay.final[: replay.size], np.tile(down, (replay.size, 1)))
+    rng = np.random.default_rng(0)
+    hindsight = replay.sample(env, 64, her_fraction=1.0, rng=rng)
+    assert np.all(hindsight["goal"].numpy() == down)
+    # Rewarded exactly on the step that pressed DOWN (the last one: any press ends an episode).
+    rewarded = hindsight["reward"].numpy() == 1.0
+    assert rewarded.any() and np.all(rewarded == (hindsight["terminated"].numpy() == 1.0))
+    as_asked = replay.sample(env, 64, her_fraction=0.0, rng=rng)
+    assert np.all(as_asked["goal"].numpy() == up) and not as_asked["reward"].numpy().any()
