@@ -85,8 +85,8 @@ def test_trials_run_side_by_side_and_archived_ones_are_not_run_again(env_dataset
     assert [len(read_progress(run)) for run in runs] == [1, 1]
     for trial, run in zip(trials, runs, strict=True):
         record = archive / trial.name
-        assert sorted(p.name for p in record.iterdir()) == ["config.json", "progress.csv", "typing.json",
-                                                            "world.json"]  # fmt: skip
+        assert sorted(p.name for p in record.iterdir()) == ["config.json", "progress.csv", "result.json",
+                                                            "typing.json", "world.json"]  # fmt: skip
         assert (record / "progress.csv").read_text() == (run / "progress.csv").read_text()
         typing = json.loads((record / "typing.json").read_text())
         assert typing["checkpoint_epoch"] == 0 and "released_protocol" in typing

@@ -122,7 +122,7 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
-RECORD_FILES = ("config.json", "world.json", "progress.csv", "typing.json", "touch.json")
+RECORD_FILES = ("config.json", "world.json", "progress.csv", "typing.json", "result.json", "touch.json")
 """What a run's archived record holds: everything a report reads, no checkpoint or replay."""
 MACHINE_SETTINGS = ("epochs", "device", "threads", "dataset")
 """Settings in which a run may differ from its archived record (where it ran, and how far)."""

@@ -185,15 +185,17 @@ def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tm
     page = leaderboard_markdown(results, title="Test board")
     assert page.startswith("# Test board")
     ranked = page.split("### Under other conditions")[0]
-    assert ranked.index("| 1 | pose oracle | 1 | 1.000 |") < ranked.index("| 2 | press at once | 2 |")
-    assert "Church et al. 2020, Table III (sim): DQN | - | 1.000 | 230 |" in ranked
+    assert ranked.index("| 1 | pose oracle | tactile | 1 | 1.000 |") < ranked.index(
+        "| 2 | press at once | tactile | 2 |"
+    )
+    assert "Church et al. 2020, Table III (sim): DQN | tactile | - | 1.000 | 230 |" in ranked
     apart = page.split("### Under other conditions")[1]
     assert "press, reset per key" in apart and 'protocol: "paper" -> "released"' in apart
     with pytest.raises(ValueError, match=r"d\.json was scored under other conditions"):
         leaderboard_markdown(results, strict=True)
     # With the released protocol as the reference, the others go apart instead.
     page = leaderboard_markdown(results, reference={"DiscreteArrows-v0": results[3][1]["fingerprint"]})
-    assert "| 1 | press, reset per key |" in page.split("### Under other conditions")[0]
+    assert "| 1 | press, reset per key | tactile |" in page.split("### Under other conditions")[0]
     with pytest.raises(ValueError, match=r"e\.json repeats seed 0 of b\.json"):
         leaderboard_markdown([*results, ("e.json", results[1][1])])
 
@@ -223,7 +225,7 @@ def test_cli_scores_a_callable_and_ranks_it(env_datasets, tmp_path, capsys):
     assert main(argv) == 2 and "exists; choose another name or pass --overwrite" in capsys.readouterr().err
     page = tmp_path / "board.md"
     assert main(["leaderboard", str(output), "--output", str(page)]) == 0
-    assert "| 1 | always press | 1 |" in page.read_text()
+    assert "| 1 | always press | tactile | 1 |" in page.read_text()
 
 
 @pytest.mark.parametrize(

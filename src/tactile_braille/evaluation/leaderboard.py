@@ -150,15 +150,15 @@ def _paper_rows(task: str) -> list[Row]:
 
 
 def _table(rows: list[Row]) -> list[str]:
-    lines = ["| rank | method | seeds | accuracy | steps | touch-only optimum | env steps trained |",
-             "|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines = ["| rank | method | track | seeds | accuracy | steps | touch-only optimum | env steps trained |",
+             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     rank = 0
     for row in rows:
         rank += not row.paper
         budget = [b for b in row.env_steps if b is not None]
         lines.append(
-            f"| {'-' if row.paper else rank} | {row.method} | {'-' if row.paper else len(row.accuracy)} "
-            f"| {_mean(row.accuracy, 3)} | {_mean(row.steps, 0)} "
+            f"| {'-' if row.paper else rank} | {row.method} | {row.track} "
+            f"| {'-' if row.paper else len(row.accuracy)} | {_mean(row.accuracy, 3)} | {_mean(row.steps, 0)} "
             f"| {'-' if row.optimum is None else f'{row.optimum:.0f}'} "
             f"| {f'{np.mean(budget):,.0f}' if budget else '-'} |"
         )
