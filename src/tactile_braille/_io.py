@@ -41,3 +41,39 @@ def atomic_path(path: str | Path, fsync: bool = False) -> Iterator[Path]:
     finally:
         if temporary.exists():
             temporary.unlink()
+
+
+class LockedError(Exception):
+    """Another process is writing what this one was about to write."""
+
+
+@contextmanager
+def exclusive_lock(path: str | Path, what: str) -> Iterator[None]:
+    """Hold an exclusive lock on the file ``path`` (created if need be) while the block runs.
+
+    One writer at a time: a second process is refused at once with a
+    :class:`LockedError` naming ``what`` and the holder's PID. The lock is the
+    operating system's (``flock``), so it is released when its holder exits
+    or is killed (``kill -9`` included): no folder is ever left locked.
+    """
+    import fcntl
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle = open(path, "a+")  # noqa: SIM115 - held open for the block's life
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "another process"
+            raise LockedError(
+                f"{what} is being written by {holder}; wait for it to end or stop it, then try again"
+            ) from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(f"process {os.getpid()}")
+        handle.flush()
+        yield
+    finally:
+        handle.close()

@@ -9,6 +9,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from tactile_braille._io import LockedError
 from tactile_braille.agents.config import ALGORITHMS, BACKENDS, PRECISIONS
 from tactile_braille.agents.presets import PRESETS as TRAINING_PRESETS
 from tactile_braille.gallery import GALLERY_DEPTH_MM
@@ -269,7 +270,8 @@ def _classify(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    config = None if args.resume is not None else _train_config(args)  # checked before torch loads
+    # Checked before torch loads and before anything is written.
+    config = _resume_config(args) if args.resume is not None else _train_config(args)
     from tactile_braille.agents.training import train
 
     rig = None
@@ -285,6 +287,26 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _resume_config(args: argparse.Namespace):
+    """A resumed run's settings: the stored ones, with the options given on top (a resume may change only
+    the machine settings; :func:`~tactile_braille.agents.run.open_run` refuses the others)."""
+    from tactile_braille.agents.config import replace_settings
+    from tactile_braille.agents.run import read_config
+    from tactile_braille.cli_config import config_overrides
+
+    stored = read_config(args.resume)
+    given = {"task": args.task, "algo": args.algo, "preset": args.preset}
+    for name, value in given.items():
+        wanted = value if name != "task" or value is None or "/" in value else f"tactile_braille/{value}"
+        if wanted is not None and wanted != getattr(stored, name):
+            raise ValueError(
+                f"{args.resume} is a run of {name} {getattr(stored, name)!r}, not {value!r}: a resume takes "
+                "the run's own settings (drop it, or start a new run)"
+            )
+    overrides = config_overrides(args, stored.algo)
+    return replace_settings(stored, overrides) if overrides else None
+
+
 def _train_config(args: argparse.Namespace):
     """The run's settings: the preset's, with every option given on top (checked before anything runs)."""
     from tactile_braille.agents.presets import preset_config
@@ -292,6 +314,7 @@ def _train_config(args: argparse.Namespace):
 
     if args.task is None:
         raise ValueError("give a TASK (an environment id) or --resume RUN_DIR")
+    args.algo, args.preset = args.algo or "dqn", args.preset or "paper"
     overrides = config_overrides(args, args.algo)
     rig = args.rig_config is not None or args.simulated_rig
     if rig and overrides.setdefault("backend", "rig") != "rig":
@@ -539,11 +562,17 @@ def _add_train_command(commands) -> None:
         "overrides the preset's value (docs/agents.md lists them).",
     )  # fmt: skip
     trainer.add_argument("task", nargs="?", help="environment id, e.g. DiscreteArrows-v0")
-    trainer.add_argument("algo", nargs="?", default="dqn", choices=ALGORITHMS)
-    trainer.add_argument("--preset", choices=TRAINING_PRESETS, default="paper",
-                         help="the paper's hyperparameters, the released code's, or ours (fast)")  # fmt: skip
+    trainer.add_argument("algo", nargs="?", choices=ALGORITHMS, help="default dqn")
+    trainer.add_argument(
+        "--preset", choices=TRAINING_PRESETS,
+        help="the paper's hyperparameters (default), the released code's, or ours (fast)",
+    )  # fmt: skip
     trainer.add_argument("--run-dir", type=Path, default=None, help="run folder (default: runs/...)")
-    trainer.add_argument("--resume", type=Path, default=None, metavar="RUN_DIR", help="continue a run")
+    trainer.add_argument(
+        "--resume", type=Path, default=None, metavar="RUN_DIR",
+        help="continue a run from its last checkpoint, with its settings (--epochs N extends it; "
+        "--threads, --device and --dataset may change; any other change is refused)",
+    )  # fmt: skip
     trainer.add_argument("--quiet", action="store_true", help="no progress bar")
     rig = trainer.add_argument_group("a robot (implies --backend rig)")
     rig.add_argument("--rig-config", type=Path, default=None, help="the UR5 rig's settings (JSON)")
@@ -763,7 +792,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.argv = argv
     try:
         return args.handler(args)
-    except (FileExistsError, FileNotFoundError, ValueError, RigError) as error:
+    except (FileExistsError, FileNotFoundError, ValueError, RigError, LockedError) as error:
         # DatasetError is a ValueError: bad input gets its message, not a traceback.
         print(f"tactile-braille: error: {error}", file=sys.stderr)
         return 2

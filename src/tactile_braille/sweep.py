@@ -40,7 +40,7 @@ from typing import Any
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, differences
 from tactile_braille.agents.presets import preset_config
-from tactile_braille.agents.run import read_config, read_progress, setting_differences
+from tactile_braille.agents.run import MACHINE_SETTINGS, read_config, read_progress, setting_differences
 from tactile_braille.agents.training import train
 from tactile_braille.envs.registry import task_of
 
@@ -103,19 +103,15 @@ def run_trial(trial: Trial, root: str | Path, progress: bool = False) -> Path:
             are allowed: the run is extended).
     """
     run_dir = Path(root) / trial.name
-    config_file = run_dir / "config.json"
-    if config_file.exists():
-        stored, wanted = json.loads(config_file.read_text()), trial.config()
+    wanted = trial.config()
+    if (run_dir / "config.json").exists():
         differing = setting_differences(run_dir, wanted)
         if differing:
             raise ValueError(f"{run_dir} holds a run with other settings ({', '.join(differing)}); "
                              "use another --root")  # fmt: skip
-        if wanted.epochs > stored["epochs"]:
-            stored["epochs"] = wanted.epochs
-            with atomic_path(config_file) as temporary:
-                temporary.write_text(json.dumps(stored, indent=2))
-        return train(run_dir=run_dir, resume=True, progress=progress)
-    return train(trial.config(), run_dir=run_dir, progress=progress)
+        extend = wanted.epochs > read_config(run_dir).epochs  # never shortened: a longer run is kept
+        return train(wanted if extend else None, run_dir=run_dir, resume=True, progress=progress)
+    return train(wanted, run_dir=run_dir, progress=progress)
 
 
 def ray_available() -> bool:
@@ -124,8 +120,6 @@ def ray_available() -> bool:
 
 RECORD_FILES = ("config.json", "world.json", "progress.csv", "typing.json", "result.json", "touch.json")
 """What a run's archived record holds: everything a report reads, no checkpoint or replay."""
-MACHINE_SETTINGS = ("epochs", "device", "threads", "dataset")
-"""Settings in which a run may differ from its archived record (where it ran, and how far)."""
 
 
 def record_differences(record: Path, config) -> list[str]:

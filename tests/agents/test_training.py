@@ -147,7 +147,14 @@ def test_td3_training_bursts_checkpoints_and_resumes(env_datasets, tmp_path, rec
             assert math.isfinite(row["losses/qf_loss"]) and math.isfinite(row["losses/q_values"])
     files = run_files(run)
     assert files["replay"] == ["replay.1.npz"]
-    assert files["other"] == ["checkpoint.pt", "config.json", "progress.csv", "snapshots", "world.json"]
+    assert files["other"] == [
+        ".lock",
+        "checkpoint.pt",
+        "config.json",
+        "progress.csv",
+        "snapshots",
+        "world.json",
+    ]
     assert sorted(p.name for p in (run / "snapshots").iterdir()) == ["epoch_0000.pt", "epoch_0001.pt"]
     assert len(files["events"]) >= 1
 

@@ -48,27 +48,79 @@ class Counters:
     updates: int = 0
 
 
-def open_run(
-    config: TrainConfig | None, run_dir: str | Path | None, resume: bool, rig=None
-) -> tuple[TrainConfig, Path]:
-    """The run's settings and folder: read back for a resume, else written to a new folder (after the
-    settings are checked against the ``rig`` handed in, if any)."""
+LOCK_FILE = ".lock"
+"""Held (``flock``) by the one process writing the run: a second writer is refused."""
+MACHINE_SETTINGS = ("epochs", "device", "threads", "dataset")
+"""Settings a resume may change: how far the run goes, and where it runs (where the dataset lies: the
+world record checks what it holds)."""
+
+
+def run_folder(config: TrainConfig | None, run_dir: str | Path | None, resume: bool) -> Path:
+    """The run's folder: given, or for a new run ``runs/{task}__{algo}__{seed}__{time}``."""
+    if run_dir is not None:
+        return Path(run_dir)
     if resume:
-        if run_dir is None:
-            raise ValueError("resume needs the run folder")
-        config = read_config(run_dir)
+        raise ValueError("resume needs the run folder")
+    config = config or TrainConfig()
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return Path(f"runs/{task_name(config.task)}__{config.algo}__{config.seed}__{stamp}")
+
+
+def open_run(config: TrainConfig | None, run_dir: Path, resume: bool, rig=None) -> TrainConfig:
+    """The run's settings: for a resume, the stored ones (with ``config``'s machine settings, if given:
+    any other difference is refused); else ``config``, written to the new folder (after it is checked
+    against the ``rig`` handed in, if any). Call it holding the run's lock (:data:`LOCK_FILE`)."""
+    if resume:
+        stored = read_config(run_dir)
+        config = stored if config is None else _resumed(run_dir, stored, config)
         config.check_rig(rig)
-        return config, Path(run_dir)
+        check_resumable(run_dir, config)
+        if config != stored:
+            with atomic_path(run_dir / CONFIG_FILE) as temporary:
+                temporary.write_text(json.dumps(config.to_json(), indent=2))
+        return config
     config = config or TrainConfig()
     config.check_rig(rig)
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    run_dir = Path(run_dir or f"runs/{task_name(config.task)}__{config.algo}__{config.seed}__{stamp}")
     if (run_dir / CONFIG_FILE).exists():
         raise FileExistsError(f"{run_dir} holds a run already; resume it or choose another folder")
     run_dir.mkdir(parents=True, exist_ok=True)
     with atomic_path(run_dir / CONFIG_FILE) as temporary:
         temporary.write_text(json.dumps(config.to_json(), indent=2))
-    return config, run_dir
+    return config
+
+
+def _resumed(run_dir: Path, stored: TrainConfig, wanted: TrainConfig) -> TrainConfig:
+    """The stored settings with ``wanted``'s machine settings; other differences are refused."""
+    other = differences(stored, wanted, ignore=MACHINE_SETTINGS)
+    if other:
+        raise ValueError(
+            f"{run_dir} was started with other settings ({'; '.join(other)}); a resume may change only "
+            f"{', '.join(MACHINE_SETTINGS)}: start a new run for the others"
+        )
+    done = len(read_progress(run_dir)) if (run_dir / PROGRESS_FILE).exists() else 0
+    if wanted.epochs < done:
+        raise ValueError(
+            f"{run_dir} has run {done} epochs already: --epochs {wanted.epochs} cannot shorten it"
+        )
+    return wanted
+
+
+def check_resumable(run_dir: Path, config: TrainConfig) -> None:
+    """Refuse a resume that would lose logged epochs: a checkpoint that was written but is gone.
+
+    An epoch's row is logged before its checkpoint is written, so a run killed in between has one
+    row more than its checkpoints cover; only a row beyond the first checkpoint's epoch proves that a
+    checkpoint existed (a run killed before its first one starts again, losing nothing it had saved).
+    """
+    if (run_dir / CHECKPOINT_FILE).exists() or not (run_dir / PROGRESS_FILE).exists():
+        return
+    logged = len(read_progress(run_dir))
+    if logged > min(config.checkpoint_every, config.epochs):
+        raise ValueError(
+            f"{run_dir} logged {logged} epochs but has no {CHECKPOINT_FILE} (deleted or moved?): resuming "
+            f"would start again at epoch 0 and drop them. Put the checkpoint back, start a new run, or "
+            f"delete {run_dir / PROGRESS_FILE} to train this one again from scratch"
+        )
 
 
 def read_config(run_dir: str | Path) -> TrainConfig:
@@ -161,18 +213,32 @@ def save_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator, coun
 
 def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -> Counters:
     """Load the last checkpoint into the agent, the replay buffer and the generators; the counters to
-    continue from (a fresh start's if the run has no checkpoint yet)."""
+    continue from (a fresh start's if the run has no checkpoint yet). A damaged checkpoint or replay
+    file is refused (a ValueError naming it) before anything is changed on disk."""
     path = run_dir / CHECKPOINT_FILE
     if not path.exists():
         return Counters()
-    state = torch.load(path, weights_only=False, map_location=agent.device)
-    agent.load_state_dict(state["agent"])
+    try:
+        state = torch.load(path, weights_only=False, map_location=agent.device)
+        counters = Counters(int(state["epoch"]) + 1, int(state["env_steps"]), int(state["updates"]))
+        agent.load_state_dict(state["agent"])
+    except Exception as error:  # torch raises many kinds on a truncated or foreign file
+        raise ValueError(
+            f"{path} is unreadable ({type(error).__name__}: {str(error)[:120]}); it is truncated, damaged or "
+            "not a checkpoint of this run: restore it from a copy, or start a new run"
+        ) from None
     rng.bit_generator.state = state["rng"]
     torch.set_rng_state(state["torch_rng"].cpu())
     if state.get("cuda_rng") is not None and torch.cuda.is_available():
         torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda_rng"]])
-    buffer.load(run_dir / state["replay"])
-    return Counters(state["epoch"] + 1, state["env_steps"], state["updates"])
+    try:
+        buffer.load(run_dir / state["replay"])
+    except Exception as error:  # a missing file, a damaged zip, arrays of another shape
+        raise ValueError(
+            f"{run_dir / state['replay']} (the replay buffer {path.name} names) is unreadable "
+            f"({type(error).__name__}: {str(error)[:120]}): restore it from a copy, or start a new run"
+        ) from None
+    return counters
 
 
 def snapshot_epochs(epochs: int, snapshots: int) -> set[int]:

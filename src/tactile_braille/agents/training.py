@@ -20,17 +20,20 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from tactile_braille._io import exclusive_lock
 from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, TrainConfig
 from tactile_braille.agents.dqn import DQNAgent
 from tactile_braille.agents.extensions import RunExtension, make_extension
 from tactile_braille.agents.replay import EpisodeReplayBuffer
 from tactile_braille.agents.rollout import evaluate
 from tactile_braille.agents.run import (
+    LOCK_FILE,
     Counters,
     EpochLog,
     open_run,
     record_world,
     restore_checkpoint,
+    run_folder,
     save_checkpoint,
     save_snapshot,
     snapshot_epochs,
@@ -65,8 +68,21 @@ def train(
     progress: bool = True,
     rig=None,
 ) -> Path:
-    """Train (or, with ``resume``, continue) a run; returns its folder. ``rig``: see :func:`make_env`."""
-    config, run_dir = open_run(config, run_dir, resume, rig)
+    """Train (or, with ``resume``, continue) a run; returns its folder. ``rig``: see :func:`make_env`.
+
+    A resume continues from the last checkpoint with the stored settings; a ``config`` given with it
+    may change only :data:`~tactile_braille.agents.run.MACHINE_SETTINGS` (``epochs`` extends the run).
+    The run's folder is locked for the call: a second writer is refused (``LockedError``).
+    """
+    run_dir = run_folder(config, run_dir, resume)
+    if not resume:  # a new run's folder is made only for settings that can run
+        (config or TrainConfig()).check_rig(rig)
+    with exclusive_lock(run_dir / LOCK_FILE, f"the run {run_dir}"):
+        return _train(open_run(config, run_dir, resume, rig), run_dir, resume, progress, rig)
+
+
+def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig) -> Path:
+    """The loop of :func:`train`, in the run's folder, its lock held."""
     torch.set_num_threads(config.threads)
     env, test_env = make_env(config, rig), make_env(config, rig)
     record_world(run_dir, env, resume)

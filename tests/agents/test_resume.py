@@ -1,0 +1,144 @@
+"""Run folders are reliable: one writer at a time, and resumes that never drop history.
+
+Each case here failed before the fix it tests (issue 19): two resumes ran side by side, ``--epochs``
+was ignored on a resume, a missing checkpoint restarted the run at epoch 0, and a damaged checkpoint
+or replay file ended in a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tactile_braille.agents import TrainConfig, read_progress
+from tactile_braille.agents.run import CHECKPOINT_FILE, LOCK_FILE, check_resumable, read_config
+from tactile_braille.agents.training import train
+from tactile_braille.cli import main
+
+ARROWS = "tactile_braille/DiscreteArrows-v0"
+
+
+@pytest.fixture
+def finished_run(env_datasets, tmp_path) -> Path:
+    """A finished one-epoch DQN run (checkpointed)."""
+    config = TrainConfig(
+        epochs=1, steps_per_epoch=30, start_steps=10, threads=1, dataset=str(env_datasets[ARROWS]),
+        agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 1, "snapshots": 1},
+        replay={"capacity": 2000},
+    )  # fmt: skip
+    return train(config, run_dir=tmp_path / "run", progress=False)
+
+
+def resume(run: Path, *options: str) -> list[str]:
+    return ["train", "--resume", str(run), "--quiet", *options]
+
+
+def one_line_error(capsys) -> str:
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "Traceback" not in error, error
+    return error
+
+
+def test_a_second_writer_is_refused_and_a_killed_one_leaves_the_run_free(finished_run, capsys):
+    # A real training process resumes the run (to many epochs) ...
+    script = (
+        "from tactile_braille.agents.run import read_config\n"
+        "from tactile_braille.agents.training import train\n"
+        f"run = {str(finished_run)!r}\n"
+        "train(read_config(run).with_changes(epochs=200), run_dir=run, resume=True, progress=False)\n"
+    )
+    child = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 60
+        while (finished_run / LOCK_FILE).read_text() != f"process {child.pid}":
+            assert child.poll() is None, child.stderr.read().decode()
+            assert time.monotonic() < deadline, "the resumed run never took its lock"
+            time.sleep(0.05)
+        # ... and a second resume, meanwhile, is refused at once, naming the first one's process.
+        before = (finished_run / "config.json").read_text()
+        assert main(resume(finished_run, "--epochs", "300")) == 2
+        assert f"is being written by process {child.pid}" in one_line_error(capsys)
+        assert (finished_run / "config.json").read_text() == before
+    finally:
+        os.kill(child.pid, signal.SIGKILL)  # kill -9: the OS releases the lock
+        child.wait()
+    done = len(read_progress(finished_run))
+    assert main(resume(finished_run, "--epochs", str(done + 1))) == 0
+    assert [int(row["epoch"]) for row in read_progress(finished_run)] == list(range(done + 1))
+
+
+def test_resume_extends_with_epochs_and_refuses_any_other_change(finished_run, capsys):
+    assert main(resume(finished_run, "--epochs", "2", "--threads", "1")) == 0
+    assert [int(row["epoch"]) for row in read_progress(finished_run)] == [0, 1]
+    assert read_config(finished_run).epochs == 2
+    stored = (finished_run / "config.json").read_text()
+    refused = {
+        ("--epochs", "1"): "has run 2 epochs already: --epochs 1 cannot shorten it",
+        ("--agent.learning-rate", "0.5"): "agent.learning_rate: 0.0005 -> 0.5",
+        ("--preset", "fast"): "is a run of preset None, not 'fast'",
+    }
+    for options, message in refused.items():
+        assert main(resume(finished_run, *options)) == 2
+        assert message in one_line_error(capsys)
+    assert main(["train", "ContinuousArrows-v0", "sac", "--resume", str(finished_run)]) == 2
+    assert "is a run of task 'tactile_braille/DiscreteArrows-v0', not" in one_line_error(capsys)
+    assert (finished_run / "config.json").read_text() == stored and len(read_progress(finished_run)) == 2
+
+
+def test_a_resume_whose_checkpoint_is_gone_is_refused_instead_of_starting_again(finished_run, capsys):
+    assert main(resume(finished_run, "--epochs", "2")) == 0
+    (finished_run / CHECKPOINT_FILE).unlink()
+    assert main(resume(finished_run, "--epochs", "3")) == 2
+    error = one_line_error(capsys)
+    assert "logged 2 epochs but has no checkpoint.pt" in error and "delete" in error
+    assert len(read_progress(finished_run)) == 2 and read_config(finished_run).epochs == 2
+    # One row and no checkpoint is a run killed between logging its first epoch and checkpointing it:
+    # no checkpoint ever existed, so starting again loses nothing saved, and the resume does.
+    progress = finished_run / "progress.csv"
+    two_rows = progress.read_text()
+    progress.write_text("\n".join(two_rows.splitlines()[:2]) + "\n")
+    check_resumable(finished_run, read_config(finished_run))
+    progress.write_text(two_rows)
+    with pytest.raises(ValueError, match="logged 2 epochs"):
+        check_resumable(finished_run, read_config(finished_run))
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (lambda run: _truncate(run / CHECKPOINT_FILE), "checkpoint.pt is unreadable"),
+        (lambda run: (run / CHECKPOINT_FILE).write_text("garbage"), "checkpoint.pt is unreadable"),
+        (lambda run: _truncate(next(run.glob("replay.*.npz"))), "(the replay buffer checkpoint.pt names)"),
+        (lambda run: next(run.glob("replay.*.npz")).unlink(), "(the replay buffer checkpoint.pt names)"),
+    ],
+    ids=["truncated checkpoint", "garbage checkpoint", "truncated replay", "missing replay"],
+)
+def test_a_damaged_checkpoint_or_replay_is_refused_in_one_line(finished_run, capsys, damage, message):
+    damage(finished_run)
+    progress = (finished_run / "progress.csv").read_text()
+    assert main(resume(finished_run, "--epochs", "2")) == 2
+    assert message in one_line_error(capsys)
+    assert (finished_run / "progress.csv").read_text() == progress
+
+
+def _truncate(path: Path) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def test_a_new_run_in_a_folder_held_by_another_writer_is_refused(finished_run, env_datasets, capsys):
+    from tactile_braille._io import LockedError, exclusive_lock
+
+    other = finished_run.parent / "other"
+    with exclusive_lock(other / LOCK_FILE, "x"), pytest.raises(LockedError, match=f"process {os.getpid()}"):
+        # A lock is per open file, so a second taker in this very process is refused too.
+        train(TrainConfig(dataset=str(env_datasets[ARROWS])), run_dir=other, progress=False)
+    assert not (other / "config.json").exists()
+    assert json.loads((finished_run / "config.json").read_text())["epochs"] == 1
