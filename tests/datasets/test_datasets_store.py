@@ -327,6 +327,24 @@ def test_writer_rejects_duplicates_out_of_range_and_early_finalise(tmp_path):
     assert not (tmp_path / "w.h5").exists()
 
 
+def test_one_writer_per_dataset_and_a_short_mismatch_message(tmp_path):
+    from tactile_braille._io import LockedError
+
+    metadata = dataset_metadata(VirtualRig(seed=0), SMALL_PERTURBED, 0)
+    writer = DatasetWriter(tmp_path / "w.h5", metadata, total=2, shard_size=1)
+    writer.add(0, *_sample(0))
+    with pytest.raises(LockedError, match=f"the dataset {tmp_path / 'w.h5'} is being written by process"):
+        DatasetWriter(tmp_path / "w.h5", metadata, total=2, resume=True)
+    writer.close()  # as if the first writer had stopped: another may go on with it
+    other = dataclasses.replace(metadata, seed=5)
+    with pytest.raises(ResumeMismatchError) as refused:
+        DatasetWriter(tmp_path / "w.h5", other, total=2, resume=True)
+    assert "seed: 0 -> 5" in str(refused.value) and len(str(refused.value)) < 300
+    again = DatasetWriter(tmp_path / "w.h5", metadata, total=2, resume=True)  # the refusal let go
+    again.add(1, *_sample(1))
+    assert again.finalize().exists()
+
+
 # --- loading bad files ---------------------------------------------------------------------------
 
 

@@ -22,6 +22,7 @@ atomic rename: a reader never sees a half-written dataset.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import json
 import os
@@ -32,7 +33,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from tactile_braille._io import atomic_path
+from tactile_braille._io import atomic_path, exclusive_lock
 
 FORMAT_NAME = "tactile_braille.dataset"
 FORMAT_VERSION = 1
@@ -193,6 +194,11 @@ def _validate_arrays(arrays: dict[str, np.ndarray], metadata: DatasetMetadata, s
         raise DatasetError(f"{source}: duplicate tap indices")
 
 
+def _short(value, width: int = 40) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
 def partial_path(path: str | Path) -> Path:
     """The folder that holds the shards of an unfinished collection into ``path``."""
     path = Path(path)
@@ -227,26 +233,46 @@ class DatasetWriter:
         if self.path.exists():
             raise FileExistsError(f"{self.path} exists already; remove it or choose another output")
         manifest = self.partial / _MANIFEST
-        if self.partial.exists() and manifest.exists():
+        existed = self.partial.exists()
+        self._lock = contextlib.ExitStack()  # one writer per dataset, held until finalize or exit
+        self._lock.enter_context(exclusive_lock(self.partial / ".lock", f"the dataset {self.path}"))
+        try:
+            self._open_partial(existed and manifest.exists(), resume)
+        except BaseException:
+            self._lock.close()
+            raise
+        self._done = self._indices_on_disk()
+        self._buffer: dict[str, list] = {name: [] for name in _ARRAYS}
+
+    def _open_partial(self, resuming: bool, resume: bool) -> None:
+        """Check an interrupted collection's manifest against this one, or start one."""
+        manifest = self.partial / _MANIFEST
+        if resuming:
             if not resume:
                 raise FileExistsError(
                     f"an interrupted collection is in {self.partial}; pass resume=True (--resume) "
                     "to continue it or delete that folder"
                 )
             recorded = json.loads(manifest.read_text())
-            wanted = {"metadata": metadata.as_json(), "total": self.total}
+            wanted = {"metadata": self.metadata.as_json(), "total": self.total}
             if recorded != wanted:
+                flat = [{"total": m["total"], **m["metadata"]} for m in (recorded, wanted)]
+                differ = sorted(
+                    k for k in flat[0].keys() | flat[1].keys() if flat[0].get(k) != flat[1].get(k)
+                )
+                shown = "; ".join(
+                    f"{k}: {_short(flat[0].get(k))} -> {_short(flat[1].get(k))}" for k in differ[:3]
+                )
                 raise ResumeMismatchError(
-                    f"cannot resume {self.partial}: it was started with other settings "
-                    f"(recorded {recorded}, now {wanted})"
+                    f"cannot resume {self.partial}: it was started with other settings ({shown}"
+                    f"{f'; and {len(differ) - 3} more' if len(differ) > 3 else ''}); resume with those, "
+                    "or delete that folder"
                 )
         else:
             self.partial.mkdir(parents=True, exist_ok=True)
             temporary = self.partial / f".{_MANIFEST}.tmp"
-            temporary.write_text(json.dumps({"metadata": metadata.as_json(), "total": self.total}))
+            temporary.write_text(json.dumps({"metadata": self.metadata.as_json(), "total": self.total}))
             os.replace(temporary, manifest)
-        self._done = self._indices_on_disk()
-        self._buffer: dict[str, list] = {name: [] for name in _ARRAYS}
 
     def _shards(self) -> list[Path]:
         return sorted(self.partial.glob("shard-*.h5"))
@@ -300,8 +326,13 @@ class DatasetWriter:
         merged = {name: values[order] for name, values in merged.items()}
         _validate_arrays(merged, self.metadata, self.path)
         _write_arrays(self.path, merged, self.metadata, compress=True)
+        self.close()
         shutil.rmtree(self.partial)
         return self.path
+
+    def close(self) -> None:
+        """Let another writer continue this dataset (the process's exit does it too)."""
+        self._lock.close()
 
 
 @dataclass(frozen=True)
