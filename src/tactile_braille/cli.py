@@ -17,10 +17,19 @@ from tactile_braille.rigs.base import RigError
 from tactile_braille.sensor.config import PRESETS as SENSORS
 
 
+def _output_file(path, option: str = "--output") -> Path:
+    """An output file's path, refused (before any work) where it is a folder."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{option} {path} is a folder; name the file to write (e.g. {path / 'out.png'})")
+    return path
+
+
 def _show(args: argparse.Namespace) -> int:
     from tactile_braille._figures import save_figure
     from tactile_braille.gallery import dataset_figure, live_gallery_tiles, save_gallery
 
+    _output_file(args.output)
     if args.dataset is not None:
         dataset = _load_named_dataset(args.dataset, args.sensor, args.seed)
         path = save_figure(dataset_figure(dataset), args.output)
@@ -96,18 +105,33 @@ def _print_commands(commands) -> None:
         print(f"  {name}({shown})")
 
 
+def _layout_keys(text: str, option: str) -> list[str]:
+    """Comma-separated key names, each checked against the keyboard's layout."""
+    from tactile_braille.keyboard.layout import KeyboardLayout
+
+    keys = [key.strip() for key in text.split(",") if key.strip()]
+    known = {key.name for key in KeyboardLayout().keys}
+    unknown = [key for key in keys if key not in known]
+    if unknown or not keys:
+        raise ValueError(
+            f"{option}: unknown keys {unknown or [text]}; the keyboard's keys are e.g. A, SPACE, UP"
+        )
+    return keys
+
+
 def _rig_check(args: argparse.Namespace) -> int:
     from tactile_braille.sensor.processing import process_frame
 
     simulated = args.simulated or args.config is None
+    keys = _layout_keys(args.keys, "--keys")
     rig, world = _open_ur5(args.config, simulated=simulated, dry_run=args.dry_run)
     mode = ("simulated hardware" if simulated else str(args.config)) + (
         ", dry run" if rig.config.dry_run else ""
     )
     print(f"UR5 rig check ({mode}): taps at depth {args.depth} mm on {args.keys}")
     with rig:
-        for key in args.keys.split(","):
-            x, y = rig.layout.centre_mm(key.strip())
+        for key in keys:
+            x, y = rig.layout.centre_mm(key)
             sample = rig.tap(x, y, args.depth)
             white = float((process_frame(sample.frame, rig.processing) > 0).mean())
             print(f"{key:>6}: pressed {sample.pressed_key or 'nothing'}, "
@@ -156,6 +180,7 @@ def _rig_crop(args: argparse.Namespace) -> int:
     from tactile_braille.rigs.hardware import TacTipCamera
     from tactile_braille.sensor.config import sensor_preset
 
+    _output_file(args.output)
     config, drivers, _ = _ur5_hardware(args.config, args.simulated, command="crop")
     camera = TacTipCamera(drivers, config.camera_index, config.camera_size_px, config.camera_exposure)
     try:
@@ -181,7 +206,11 @@ def _keycaps(args: argparse.Namespace) -> int:
     from tactile_braille.keyboard.layout import ALL_TASK_KEYS, KeyboardLayout
 
     layout = KeyboardLayout()
-    keys = ALL_TASK_KEYS if args.keys is None else tuple(k.strip().upper() for k in args.keys.split(","))
+    keys = (
+        ALL_TASK_KEYS
+        if args.keys is None
+        else tuple(dict.fromkeys(k.strip().upper() for k in args.keys.split(",")))
+    )
     unknown = [k for k in keys if k not in layout]
     if unknown:
         raise ValueError(f"unknown keys {unknown}; e.g. A, SPACE, UP (the layout's names)")
@@ -500,7 +529,7 @@ def _add_show_command(commands) -> None:
         default=GALLERY_DEPTH_MM,
         help=f"tap depth in mm ({GALLERY_DEPTH_MM}: no key registers)",
     )
-    show.add_argument("--seed", type=int, default=0, help="seed of the sensor nuisances")
+    show.add_argument("--seed", type=_non_negative, default=0, help="seed of the sensor nuisances")
     show.set_defaults(handler=_show)
 
 
@@ -516,7 +545,7 @@ def _add_collect_command(commands) -> None:
     collect.add_argument("--rig-config", type=Path, default=None, help="the UR5 rig's settings (JSON)")
     collect.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
     collect.add_argument("--output", type=Path, required=True, help="dataset file (.h5) to write")
-    collect.add_argument("--seed", type=int, default=0)
+    collect.add_argument("--seed", type=_non_negative, default=0)
     collect.add_argument("--resume", action="store_true", help="continue an interrupted collection")
     collect.add_argument("--per-key", type=int, default=100, help="perturbed: taps per key")
     collect.add_argument("--split", choices=("train", "validation"), default="train")
@@ -545,9 +574,9 @@ def _add_classify_command(commands) -> None:
         "--output", type=Path, default=None, help="run folder (default: runs/classifier__...)"
     )
     classify.add_argument("--epochs", type=int, default=60, help="maximum epochs (early stopping)")
-    classify.add_argument("--seed", type=int, default=0)
+    classify.add_argument("--seed", type=_non_negative, default=0)
     classify.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
-    classify.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    classify.add_argument("--threads", type=_positive, default=2, help="torch CPU threads")
     classify.set_defaults(handler=_classify)
 
 
@@ -585,7 +614,7 @@ def _add_report_command(commands) -> None:
     """The ``report`` command."""
     report = commands.add_parser("report", help="reports of training runs (and over runs and seeds)")
     report.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
-    report.add_argument("--episodes", type=int, default=100, help="final test episodes (default 100)")
+    report.add_argument("--episodes", type=_positive, default=100, help="final test episodes (default 100)")
     report.add_argument(
         "--output",
         type=Path,
@@ -663,6 +692,13 @@ def _non_negative(text: str) -> int:
     return value
 
 
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
+    return value
+
+
 def _add_sweep_command(commands) -> None:
     """The ``sweep`` command."""
     sweeper = commands.add_parser("sweep", help="train tasks x algorithms x seeds (Ray Tune when installed)")
@@ -714,7 +750,7 @@ def _add_data_command(commands) -> None:
     """The ``data`` command."""
     data = commands.add_parser("data", help="generate (or reuse) the default datasets in the cache")
     data.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
-    data.add_argument("--seed", type=int, default=0)
+    data.add_argument("--seed", type=_non_negative, default=0)
     data.set_defaults(handler=_data)
 
 
@@ -792,8 +828,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.argv = argv
     try:
         return args.handler(args)
-    except (FileExistsError, FileNotFoundError, ValueError, RigError, LockedError) as error:
-        # DatasetError is a ValueError: bad input gets its message, not a traceback.
+    except (OSError, ValueError, RigError, LockedError) as error:
+        # DatasetError is a ValueError; an OSError is a path, a permission or a full disk: what the user
+        # can fix gets its message, not a traceback.
         print(f"tactile-braille: error: {error}", file=sys.stderr)
         return 2
 

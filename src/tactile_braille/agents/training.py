@@ -77,8 +77,12 @@ def train(
     run_dir = run_folder(config, run_dir, resume)
     if not resume:  # a new run's folder is made only for settings that can run
         (config or TrainConfig()).check_rig(rig)
+    if config is not None:
+        check_device(config.device)
     with exclusive_lock(run_dir / LOCK_FILE, f"the run {run_dir}"):
-        return _train(open_run(config, run_dir, resume, rig), run_dir, resume, progress, rig)
+        config = open_run(config, run_dir, resume, rig)
+        check_device(config.device)  # a resume's stored device
+        return _train(config, run_dir, resume, progress, rig)
 
 
 def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig) -> Path:
@@ -127,6 +131,18 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
             if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
                 save_checkpoint(run_dir, agent, buffer, rng, counters)
     return run_dir
+
+
+def check_device(device: str) -> None:
+    """Refuse a device this machine does not have, before anything is written."""
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(
+            f"device {device!r}: CUDA is not available here (torch {torch.__version__}); use cpu"
+        )
+    if device.startswith("cuda:") and int(device.split(":")[1]) >= torch.cuda.device_count():
+        raise ValueError(f"device {device!r}: this machine has {torch.cuda.device_count()} CUDA devices")
+    if device == "mps" and not torch.backends.mps.is_available():
+        raise ValueError("device 'mps': Apple's Metal backend is not available here; use cpu")
 
 
 def updates_due(config: TrainConfig, env_steps: int, buffer: EpisodeReplayBuffer) -> bool:

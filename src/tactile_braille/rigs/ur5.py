@@ -158,9 +158,16 @@ class UR5Config:
     def from_json(cls, data: dict) -> UR5Config:
         """A configuration from :meth:`to_json`'s data; unknown keys are an error."""
         known = {f.name for f in dataclasses.fields(cls)}
+        if not isinstance(data, dict):
+            raise ValueError(f"UR5 rig settings are a JSON object of settings, got {type(data).__name__}")
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown UR5 rig settings {unknown}; known: {sorted(known)}")
+        required = [f.name for f in dataclasses.fields(cls) if f.default is dataclasses.MISSING
+                    and f.default_factory is dataclasses.MISSING]  # fmt: skip
+        missing = [name for name in required if name not in data]
+        if missing:
+            raise ValueError(f"the UR5 rig settings lack {missing} (docs/hardware.md shows a full file)")
         return cls(**data)
 
     @classmethod

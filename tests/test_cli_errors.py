@@ -1,0 +1,58 @@
+"""Every error a user can cause ends in one line and exit status 2, before anything is written.
+
+A table of the inputs issue 19 found ending in tracebacks or in folders that then blocked a re-run,
+each run through ``tactile_braille.cli.main`` as the shell runs it.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from tactile_braille.cli import main
+
+CASES = {
+    "train --seed -1": (["train", "DiscreteArrows-v0", "--seed", "-1", "--run-dir", "{tmp}/run"],
+                        "TrainConfig.seed must be at least 0"),
+    "train --device bogus": (["train", "DiscreteArrows-v0", "--device", "bogus", "--run-dir", "{tmp}/run"],
+                             "device must be cpu, cuda, cuda:N or mps"),
+    "train --epochs 1e30": (["train", "DiscreteArrows-v0", "--epochs", "1e30", "--run-dir", "{tmp}/run"],
+                            "invalid int value: '1e30'"),
+    "collect --seed -1": (["collect", "--seed", "-1", "--output", "{tmp}/c.h5"], "must be a non-negative"),
+    "data --seed -1": (["data", "--seed", "-1"], "must be a non-negative integer, got -1"),
+    "classify --threads 0": (["classify", "--threads", "0"], "must be a positive integer, got 0"),
+    "report --episodes -1": (["report", "{tmp}/run", "--episodes", "-1"], "must be a positive integer"),
+    "rig check --keys ZZ": (["rig", "check", "--keys", "ZZ"], "--keys: unknown keys ['ZZ']"),
+    "rig check, settings {}": (["rig", "check", "--config", "{tmp}/rig.json"],
+                               "the UR5 rig settings lack ['host'"),
+    "show --output a folder": (["show", "--output", "{tmp}"], "is a folder; name the file to write"),
+    "rig crop --output a folder": (["rig", "crop", "--simulated", "--output", "{tmp}"], "is a folder"),
+    "collect --output under a file": (["collect", "--keys", "arrows", "--output", "{tmp}/file/x.h5"],
+                                      "Not a directory"),
+    "evaluate a file": (["evaluate", "{tmp}/file"], "is not a training run (no config.json)"),
+    "resume a folder with no run": (["train", "--resume", "{tmp}"], "is not a resumable run"),
+}  # fmt: skip
+if not torch.cuda.is_available():
+    CASES["train --device cuda without CUDA"] = (
+        ["train", "DiscreteArrows-v0", "--device", "cuda", "--run-dir", "{tmp}/run"],
+        "CUDA is not available",
+    )
+
+
+@pytest.mark.parametrize(("argv", "message"), CASES.values(), ids=CASES.keys())
+def test_a_user_error_is_one_line_exit_2_and_writes_nothing(argv, message, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # nothing may be written, but never into the repository
+    monkeypatch.setenv("TACTILE_BRAILLE_DATA", str(tmp_path / "cache"))
+    (tmp_path / "file").write_text("not a folder")
+    (tmp_path / "rig.json").write_text(json.dumps({}))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    try:
+        code = main([part.replace("{tmp}", str(tmp_path)) for part in argv])
+    except SystemExit as exit_:  # argparse's own errors (a usage line, then the error)
+        code = exit_.code
+    assert code == 2
+    error = capsys.readouterr().err
+    assert "Traceback" not in error and message in error.splitlines()[-1], error
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no run folder, dataset or .partial
