@@ -119,6 +119,36 @@ def test_vector_env_refuses_other_backends_and_empty_batches(make_vec):
         make_vec("tactile_braille/DiscreteArrows-v0", num_envs=0)
 
 
+def test_a_vector_env_refuses_a_step_before_its_first_reset(make_vec):
+    from gymnasium.error import ResetNeeded
+
+    env = make_vec("tactile_braille/DiscreteArrows-v0", num_envs=2)
+    with pytest.raises(ResetNeeded, match="before its first reset"):
+        env.step(np.zeros(2, dtype=np.int64))
+    env.reset(seed=0)
+    env.step(np.zeros(2, dtype=np.int64))
+
+
+def test_a_single_env_refuses_a_step_after_termination_and_checks_its_options(vector_datasets):
+    from gymnasium.error import ResetNeeded
+
+    from tactile_braille.envs.oracle import oracle_action
+
+    env_id = "tactile_braille/DiscreteArrows-v0"
+    env = gym.make(env_id, dataset=vector_datasets[env_id])
+    env.reset(seed=0)
+    terminated = False
+    while not terminated:  # the pose oracle goes to the goal key and presses it
+        _, _, terminated, truncated, _ = env.step(oracle_action(env))
+        assert not truncated
+    with pytest.raises(ResetNeeded, match="call reset"):
+        env.step(DISCRETE_ACTIONS.index("PRESS"))
+    env.reset(options={"keep_pose": True})
+    env.step(oracle_action(env))  # a reset lets it go on
+    with pytest.raises(TypeError, match="keep_pose must be True or False, got 'no'"):
+        env.reset(options={"keep_pose": "no"})
+
+
 # ----------------------------------------------------------------------------- autoreset, truncation
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_next_step_autoreset_rules(env_id, make_vec):

@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.error import ResetNeeded
 
 from tactile_braille.datasets.store import TactileDataset
 from tactile_braille.envs.backends import DatasetBackend, RigBackend
@@ -68,6 +69,7 @@ class BrailleEnv(gym.Env):
         self._path_mm: list[tuple[float, float]] = []
         self._all = np.ones(1, dtype=bool)
         self._figure = None
+        self._terminated = False
 
     @property
     def layout(self):
@@ -94,9 +96,11 @@ class BrailleEnv(gym.Env):
         """
         options = dict(options or {})
         goal = options.pop("goal_key", None)
-        keep_pose = bool(options.pop("keep_pose", False))
+        keep_pose = options.pop("keep_pose", False)
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}; known: goal_key, keep_pose")
+        if not isinstance(keep_pose, bool | np.bool_):
+            raise TypeError(f"reset option keep_pose must be True or False, got {keep_pose!r}")
         if goal is not None and goal not in self.goal_keys:
             raise ValueError(f"goal_key {goal!r} is not one of {self.goal_keys}")
         if keep_pose and not self._path_mm:
@@ -107,9 +111,12 @@ class BrailleEnv(gym.Env):
             self._core.goal[0] = self.goal_keys.index(goal)
         pose = self._core.sensor_pose_mm()[0]
         self._path_mm = [(pose[0], pose[1])]
+        self._terminated = False
         return self._observation(), self._info(pose)
 
     def step(self, action):
+        if self._terminated:
+            raise ResetNeeded("the episode has terminated (a key was pressed): call reset() before step()")
         action = np.asarray(action)
         if action.shape != self.action_space.shape:
             raise ValueError(f"expected an action of shape {self.action_space.shape}, got {action.shape}")
@@ -117,7 +124,7 @@ class BrailleEnv(gym.Env):
         reward = float(self._core.step(actions, self._all, self.np_random)[0])
         pose = self._core.sensor_pose_mm()[0]
         self._path_mm.append((pose[0], pose[1]))
-        terminated = bool(self._core.pressed_code[0] >= 0)
+        terminated = self._terminated = bool(self._core.pressed_code[0] >= 0)
         if self.render_mode == "human":
             self.render()
         return self._observation(), reward, terminated, False, self._info(pose)

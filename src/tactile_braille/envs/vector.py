@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
@@ -64,6 +65,7 @@ class VectorBrailleEnv(VectorEnv):
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._np_random, _ = seeding.np_random(None)
+        self._started = False
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Reset every sub-environment (``seed`` seeds the whole batch)."""
@@ -74,10 +76,13 @@ class VectorBrailleEnv(VectorEnv):
         self._core.reset(everyone, self._np_random)
         self._steps[:] = 0
         self._needs_reset[:] = False
+        self._started = True
         return self._core.observations(), self._infos()
 
     def step(self, actions):
         """Step every sub-environment; those that ended last step are reset instead."""
+        if not self._started:
+            raise ResetNeeded("cannot step the vector environment before its first reset()")
         actions = self._core.check_actions(actions)
         resetting = self._needs_reset
         active = ~resetting
