@@ -23,6 +23,8 @@ CASES = {
     "collect --seed -1": (["collect", "--seed", "-1", "--output", "{tmp}/c.h5"], "must be a non-negative"),
     "data --seed -1": (["data", "--seed", "-1"], "must be a non-negative integer, got -1"),
     "classify --threads 0": (["classify", "--threads", "0"], "must be a positive integer, got 0"),
+    "classify into an existing folder": (["classify", "--output", "{tmp}"], "exists; choose another folder"),
+    "classify into a file": (["classify", "--output", "{tmp}/file"], "(it is a file)"),
     "report --episodes -1": (["report", "{tmp}/run", "--episodes", "-1"], "must be a positive integer"),
     "rig check --keys ZZ": (["rig", "check", "--keys", "ZZ"], "--keys: unknown keys ['ZZ']"),
     "rig check, settings {}": (["rig", "check", "--config", "{tmp}/rig.json"],

@@ -279,13 +279,18 @@ def _classify(args: argparse.Namespace) -> int:
     from tactile_braille.supervised.classifier import ClassifierConfig, train_classifier
     from tactile_braille.supervised.report import evaluate_classifier
 
+    output = Path(args.output or f"runs/classifier__seed{args.seed}__{time.strftime('%Y%m%d-%H%M%S')}")
+    if output.exists() and not (output.is_dir() and args.overwrite):  # checked before the training
+        raise FileExistsError(
+            f"--output {output} exists; choose another folder"
+            + (" (or pass --overwrite to replace it)" if output.is_dir() else " (it is a file)")
+        )
     torch.set_num_threads(args.threads)
     train = _load_named_dataset(args.train, args.sensor, 0)
     validation = _load_named_dataset(args.validation, args.sensor, 0)
     start = time.perf_counter()
     config = ClassifierConfig(max_epochs=args.epochs, seed=args.seed)
     result = train_classifier(train, validation, config, progress=True)
-    output = Path(args.output or f"runs/classifier__seed{args.seed}__{time.strftime('%Y%m%d-%H%M%S')}")
     scored = evaluate_classifier(result, validation, output, train_path=train.path)
     print(f"validation accuracy {scored.accuracy:.2%} on {scored.images} images, "
           f"best epoch {result.best_epoch}, {time.perf_counter() - start:.0f} s")  # fmt: skip
@@ -577,6 +582,7 @@ def _add_classify_command(commands) -> None:
     classify.add_argument("--seed", type=_non_negative, default=0)
     classify.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
     classify.add_argument("--threads", type=_positive, default=2, help="torch CPU threads")
+    classify.add_argument("--overwrite", action="store_true", help="replace an existing --output folder")
     classify.set_defaults(handler=_classify)
 
 
