@@ -234,7 +234,7 @@ def _collect(args: argparse.Namespace) -> int:
         procedure = GridTaps(keys=args.keys, spacing_mm=args.spacing_mm, depth_step_mm=args.depth_step_mm)
     start = time.perf_counter()
     with _make_rig(args) as rig:
-        path = collect(rig, procedure, args.output, seed=args.seed, resume=args.resume)
+        path = collect(rig, procedure, args.output, seed=args.seed, resume=args.resume, restart=args.restart)
     size_mb = path.stat().st_size / 1e6
     print(f"wrote {path}: {len(procedure)} taps, {size_mb:.1f} MB, {time.perf_counter() - start:.1f} s")
     return 0
@@ -244,7 +244,12 @@ def _import(args: argparse.Namespace) -> int:
     from tactile_braille.datasets.importer import import_original
 
     path = import_original(
-        args.csv, args.output, videos_dir=args.videos, grid_frame=args.grid_frame, resume=args.resume
+        args.csv,
+        args.output,
+        videos_dir=args.videos,
+        grid_frame=args.grid_frame,
+        resume=args.resume,
+        restart=args.restart,
     )
     print(f"wrote {path}")
     return 0
@@ -552,6 +557,11 @@ def _add_collect_command(commands) -> None:
     collect.add_argument("--output", type=Path, required=True, help="dataset file (.h5) to write")
     collect.add_argument("--seed", type=_non_negative, default=0)
     collect.add_argument("--resume", action="store_true", help="continue an interrupted collection")
+    collect.add_argument(
+        "--restart",
+        action="store_true",
+        help="discard an interrupted collection (OUTPUT.partial) and start again",
+    )
     collect.add_argument("--per-key", type=int, default=100, help="perturbed: taps per key")
     collect.add_argument("--split", choices=("train", "validation"), default="train")
     collect.add_argument("--spacing-mm", type=float, default=None, help="grid: x/y step (paper's)")
@@ -566,7 +576,12 @@ def _add_import_command(commands) -> None:
     importer.add_argument("--output", type=Path, required=True)
     importer.add_argument("--videos", type=Path, default=None, help="video folder (default: videos/)")
     importer.add_argument("--grid-frame", choices=("alphabet", "arrows"), default=None)
-    importer.add_argument("--resume", action="store_true")
+    importer.add_argument("--resume", action="store_true", help="continue an interrupted import")
+    importer.add_argument(
+        "--restart",
+        action="store_true",
+        help="discard an interrupted import (OUTPUT.partial), e.g. after a fix",
+    )
     importer.set_defaults(handler=_import)
 
 

@@ -259,3 +259,36 @@ def test_import_refuses_to_overwrite(recording, tmp_path):
     with pytest.raises(FileExistsError):
         import_original(recording["csv"], output, progress=False)
     assert output.read_bytes() == before
+
+
+def test_a_nan_pose_stops_the_import_cleanly_and_restart_recovers_after_the_fix(recording, tmp_path):
+    """Issue 19: a NaN once left a bad shard that no resume or re-run could get past."""
+    from tactile_braille.datasets.store import ResumeMismatchError, partial_path
+
+    rows = [dict(row) for row in recording["rows"]]
+    rows[1]["pose_1"] = "nan"
+    csv_path = _write_csv(tmp_path / "targets_video.csv", SUPERVISED_COLUMNS, rows)
+    output, videos = tmp_path / "out.h5", recording["root"] / "videos"
+    with pytest.raises(DatasetError, match="row 3: column pose_1 holds 'nan', not a finite number"):
+        import_original(csv_path, output, videos_dir=videos, progress=False)
+    assert partial_path(output).exists() and not output.exists()
+    # The csv is fixed: a resume is refused (its inputs changed, by content: the name is the same) ...
+    rows[1]["pose_1"] = recording["rows"][1]["pose_1"]
+    _write_csv(csv_path, SUPERVISED_COLUMNS, rows)
+    with pytest.raises(ResumeMismatchError, match="csv_sha256"):
+        import_original(csv_path, output, videos_dir=videos, resume=True, progress=False)
+    # ... and --restart discards the interrupted import and makes the whole dataset.
+    made = import_original(csv_path, output, videos_dir=videos, restart=True, progress=False)
+    assert len(load_dataset(made)) == len(rows) and not partial_path(output).exists()
+
+
+def test_a_short_row_or_a_folder_for_a_csv_is_refused(recording, tmp_path):
+    csv_path = _write_csv(tmp_path / "targets_video.csv", SUPERVISED_COLUMNS, recording["rows"][:2])
+    lines = csv_path.read_text().splitlines()
+    csv_path.write_text("\n".join([*lines[:2], lines[2].rsplit(",", 3)[0]]) + "\n")
+    with pytest.raises(DatasetError, match="row 3: the row has fewer columns than the header"):
+        import_original(
+            csv_path, tmp_path / "out.h5", videos_dir=recording["root"] / "videos", progress=False
+        )
+    with pytest.raises(DatasetError, match="is not a file"):
+        import_original(tmp_path, tmp_path / "other.h5", progress=False)

@@ -38,6 +38,7 @@ def collect(
     output: str | Path,
     seed: int = 0,
     resume: bool = False,
+    restart: bool = False,
     progress: bool = True,
     shard_size: int = 256,
 ) -> Path:
@@ -53,7 +54,12 @@ def collect(
         The path of the finished dataset.
     """
     writer = DatasetWriter(
-        output, dataset_metadata(rig, procedure, seed), len(procedure), resume=resume, shard_size=shard_size
+        output,
+        dataset_metadata(rig, procedure, seed),
+        len(procedure),
+        resume=resume,
+        shard_size=shard_size,
+        restart=restart,
     )
     names = writer.metadata.key_names
     name_index = {name: i for i, name in enumerate(names)}

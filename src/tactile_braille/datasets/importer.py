@@ -17,6 +17,9 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
+import io
+import math
 from pathlib import Path
 
 import cv2
@@ -50,23 +53,33 @@ def read_video_frame(path: Path, frame_index: int = 1) -> np.ndarray:
 
 def _parse_pose(text: str, source: object) -> list[float]:
     try:
-        values = [float(v) for v in text.strip().strip("[]").split(",")]
+        values = [float(v) for v in str(text).strip().strip("[]").split(",")]
     except ValueError:
         raise DatasetError(f"{source}: malformed obj_pose {text!r}") from None
     if len(values) != 6:
         raise DatasetError(f"{source}: obj_pose {text!r} should have 6 values")
+    if not all(math.isfinite(v) for v in values):
+        raise DatasetError(f"{source}: obj_pose {text!r} holds a value that is not a finite number")
     return values
 
 
 def _number(row: dict, column: str, source: object) -> float:
     try:
-        return float(row[column])
+        value = float(row[column])
     except (TypeError, ValueError):
         raise DatasetError(f"{source}: column {column} holds {row[column]!r}, not a number") from None
+    if not math.isfinite(value):
+        raise DatasetError(f"{source}: column {column} holds {row[column]!r}, not a finite number")
+    return value
 
 
 def _metadata(
-    csv_name: str, grid_frame: str | None, frame_index: int, processing: ImageProcessing, key_names
+    csv_name: str,
+    csv_sha256: str,
+    grid_frame: str | None,
+    frame_index: int,
+    processing: ImageProcessing,
+    key_names,
 ) -> DatasetMetadata:
     """What an imported dataset records of its origin: the real rig of the original release."""
     return DatasetMetadata(
@@ -74,6 +87,7 @@ def _metadata(
         procedure={
             "procedure": "grid" if grid_frame else "perturbed",
             "imported_from": csv_name,
+            "csv_sha256": csv_sha256,  # what the rows hold: a resume after an edit is refused
             "grid_frame": grid_frame,
             "frame_index": frame_index,
         },
@@ -107,6 +121,7 @@ def import_original(
     processing: ImageProcessing | None = None,
     resume: bool = False,
     progress: bool = True,
+    restart: bool = False,
 ) -> Path:
     """Convert an original-format recording to a dataset file.
 
@@ -118,7 +133,8 @@ def import_original(
             ``"arrows"``); ``None`` for supervised data.
         frame_index: which frame of each video to keep.
         processing: image processing (the paper's by default).
-        resume: continue an interrupted import.
+        resume: continue an interrupted import (refused if the csv changed since).
+        restart: discard an interrupted import and start again (after fixing the csv).
 
     Raises:
         DatasetError: a malformed csv, an unknown key, a missing or short video.
@@ -128,8 +144,10 @@ def import_original(
     processing = processing or ImageProcessing()
     if grid_frame is not None:
         work_frame_origin_mm(grid_frame)  # validates the name
-    with open(csv_path, newline="") as handle:
-        rows = list(csv.DictReader(handle))
+    if not csv_path.is_file():
+        raise DatasetError(f"{csv_path} is not a file (the original release's targets_video.csv)")
+    text = csv_path.read_bytes()
+    rows = list(csv.DictReader(io.StringIO(text.decode("utf-8", errors="replace"), newline="")))
     required = {"sensor_video", "obj_lbl", "obj_pose"}
     required |= {"tap_depth", "pressed_buttons"} if grid_frame else {"pose_1", "pose_2", "pose_3", "pose_6"}
     if not rows or not required <= set(rows[0]):
@@ -137,8 +155,9 @@ def import_original(
     layout = KeyboardLayout()
     key_names = (*(key.name for key in layout.keys), NONE_KEY)
     name_index = {name: i for i, name in enumerate(key_names)}
-    metadata = _metadata(csv_path.name, grid_frame, frame_index, processing, key_names)
-    writer = DatasetWriter(output, metadata, len(rows), resume=resume)
+    digest = hashlib.sha256(text).hexdigest()
+    metadata = _metadata(csv_path.name, digest, grid_frame, frame_index, processing, key_names)
+    writer = DatasetWriter(output, metadata, len(rows), resume=resume, restart=restart)
     pending = writer.pending()
     if progress:
         from tqdm.auto import tqdm
@@ -148,6 +167,8 @@ def import_original(
         for index in pending:
             row = rows[index]
             source = f"{csv_path}, row {index + 2}"
+            if any(row.get(column) is None for column in required):
+                raise DatasetError(f"{source}: the row has fewer columns than the header")
             x, y, depth, yaw, label, pressed = _tap(row, grid_frame, source)
             for key in (label, pressed):
                 if key not in name_index:

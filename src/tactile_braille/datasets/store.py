@@ -215,6 +215,7 @@ class DatasetWriter:
         total: number of taps of the procedure.
         resume: continue an interrupted collection instead of refusing to.
         shard_size: samples per shard (the most a crash can lose).
+        restart: discard an interrupted collection (its ``.partial`` folder) and start again.
     """
 
     def __init__(
@@ -224,6 +225,7 @@ class DatasetWriter:
         total: int,
         resume: bool = False,
         shard_size: int = 256,
+        restart: bool = False,
     ) -> None:
         self.path = Path(path)
         self.metadata = metadata
@@ -237,7 +239,11 @@ class DatasetWriter:
         self._lock = contextlib.ExitStack()  # one writer per dataset, held until finalize or exit
         self._lock.enter_context(exclusive_lock(self.partial / ".lock", f"the dataset {self.path}"))
         try:
-            self._open_partial(existed and manifest.exists(), resume)
+            if restart and existed:  # the lock is held: no other writer is using what goes
+                for item in self.partial.iterdir():
+                    if item.name != ".lock":
+                        shutil.rmtree(item) if item.is_dir() else item.unlink()
+            self._open_partial(existed and manifest.exists() and not restart, resume)
         except BaseException:
             self._lock.close()
             raise
