@@ -142,3 +142,26 @@ def test_a_new_run_in_a_folder_held_by_another_writer_is_refused(finished_run, e
         train(TrainConfig(dataset=str(env_datasets[ARROWS])), run_dir=other, progress=False)
     assert not (other / "config.json").exists()
     assert json.loads((finished_run / "config.json").read_text())["epochs"] == 1
+
+
+def test_a_resume_cleans_a_killed_writers_temporary_files_and_logs_each_step_once(finished_run):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    stale = finished_run / ".checkpoint.pt.k1ll3d.tmp"  # as atomic_path names them
+    stale.write_bytes(b"half a checkpoint")
+    assert main(resume(finished_run, "--epochs", "2")) == 0
+    assert not stale.exists()
+    # Epoch 1 logged, then lost with its checkpoint (as a kill between the two leaves a run): it is
+    # run again on the next resume, and TensorBoard keeps only the second run of it.
+    kept = {path.name: path.read_bytes() for path in finished_run.iterdir() if path.suffix in (".pt", ".npz")}
+    assert main(resume(finished_run, "--epochs", "3")) == 0
+    for path in [*finished_run.glob("replay.*.npz"), finished_run / CHECKPOINT_FILE]:
+        path.unlink()
+    for name, data in kept.items():  # the checkpoint after epoch 1, and its replay
+        (finished_run / name).write_bytes(data)
+    assert main(resume(finished_run, "--epochs", "3")) == 0
+    assert [int(row["epoch"]) for row in read_progress(finished_run)] == [0, 1, 2]
+    events = EventAccumulator(str(finished_run))
+    events.Reload()
+    steps = [event.step for event in events.Scalars("charts/test/episodic_return")]
+    assert steps == sorted(set(steps)) == [30, 60, 90]

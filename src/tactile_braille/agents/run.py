@@ -72,6 +72,8 @@ def open_run(config: TrainConfig | None, run_dir: Path, resume: bool, rig=None) 
     against the ``rig`` handed in, if any). Call it holding the run's lock (:data:`LOCK_FILE`)."""
     if resume:
         stored = read_config(run_dir)
+        for stale in [*run_dir.glob(".*.tmp"), *run_dir.glob("snapshots/.*.tmp")]:
+            stale.unlink()  # a writer killed mid-write left it (atomic writes go through such files)
         config = stored if config is None else _resumed(run_dir, stored, config)
         config.check_rig(rig)
         check_resumable(run_dir, config)
@@ -262,9 +264,12 @@ class EpochLog:
     A context manager: leaving it closes the writer and the bar.
     """
 
-    def __init__(self, run_dir: Path, epochs: int, start_epoch: int, progress: bool) -> None:
+    def __init__(
+        self, run_dir: Path, epochs: int, start_epoch: int, progress: bool, resumed_at: int | None = None
+    ) -> None:
+        """``resumed_at``: for a resume, the environment steps of its checkpoint."""
         self.path = run_dir / PROGRESS_FILE
-        self.writer = _tensorboard(run_dir)
+        self.writer = _tensorboard(run_dir, resumed_at)
         self.bar = None
         if progress:
             from tqdm.auto import tqdm
@@ -296,12 +301,13 @@ class EpochLog:
             self.bar.update(1)
 
 
-def _tensorboard(run_dir: Path):
+def _tensorboard(run_dir: Path, resumed_at: int | None):
     try:
         from torch.utils.tensorboard import SummaryWriter
     except ImportError:  # TensorBoard is optional; the CSV log is always written
         return None
-    return SummaryWriter(str(run_dir))
+    # A resume drops what was logged after its checkpoint (epochs that are run again).
+    return SummaryWriter(str(run_dir), purge_step=None if resumed_at is None else resumed_at + 1)
 
 
 def read_progress(run_dir: str | Path) -> list[dict[str, float]]:

@@ -99,7 +99,9 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
     episodes = Episodes(env, buffer, extension, rng)
     burst, batch_size = config.update_every * config.updates_per_step, config.agent.batch_size
     losses: dict[str, float] = {}
-    with EpochLog(run_dir, config.epochs, counters.epoch, progress) as log:
+    with EpochLog(
+        run_dir, config.epochs, counters.epoch, progress, counters.env_steps if resume else None
+    ) as log:
         for epoch in range(counters.epoch, config.epochs):
             started = time.perf_counter()
             for _ in range(config.steps_per_epoch):

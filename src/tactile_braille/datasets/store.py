@@ -247,6 +247,8 @@ class DatasetWriter:
         except BaseException:
             self._lock.close()
             raise
+        for stale in self.partial.glob(".*.tmp"):
+            stale.unlink()  # a writer killed mid-write left it
         self._done = self._indices_on_disk()
         self._buffer: dict[str, list] = {name: [] for name in _ARRAYS}
 
