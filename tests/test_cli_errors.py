@@ -35,6 +35,11 @@ CASES = {
                                       "Not a directory"),
     "evaluate a file": (["evaluate", "{tmp}/file"], "is not a training run (no config.json)"),
     "resume a folder with no run": (["train", "--resume", "{tmp}"], "is not a resumable run"),
+    "collect a grid of 0.001 mm": (["collect", "--procedure", "grid", "--keys", "arrows", "--spacing-mm",
+                                    "0.001", "--output", "{tmp}/g.h5"], "taps, more than the 1,000,000"),
+    "keycaps --resolution-mm 0.0001": (["keycaps", "--resolution-mm", "0.0001", "--out", "{tmp}/caps"],
+                                       "finer than 0.01 mm"),
+    "import a folder as its csv": (["import", "{tmp}", "--output", "{tmp}/i.h5"], "is not a file"),
 }  # fmt: skip
 if not torch.cuda.is_available():
     CASES["train --device cuda without CUDA"] = (

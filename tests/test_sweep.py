@@ -130,3 +130,13 @@ def test_two_tiny_trials_on_a_local_ray(env_datasets, tmp_path):
         rows = read_progress(run)
         assert len(rows) == 1 and rows[0]["env_steps"] == 30
         assert f"__{seed}" in run.name
+
+
+def test_ray_asked_for_but_not_installed_is_refused_before_anything_is_made(tmp_path, monkeypatch):
+    import tactile_braille.sweep as sweep_module
+
+    monkeypatch.setattr(sweep_module, "ray_available", lambda: False)
+    trials = plan(["DiscreteArrows-v0"], ["dqn"], [0], "fast", epochs=1)
+    with pytest.raises(ValueError, match=r"--ray yes needs Ray: pip install 'tactile_braille\[sweep\]'"):
+        sweep(trials, tmp_path / "root", use_ray=True, progress=False)
+    assert not (tmp_path / "root").exists()

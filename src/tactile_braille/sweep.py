@@ -199,6 +199,8 @@ def sweep(
         raise ValueError(f"jobs must be at least 1, got {jobs}")
     for trial in trials:
         trial.config()  # bad settings fail here, before any trial starts
+    if use_ray and not ray_available():
+        raise ValueError("--ray yes needs Ray: pip install 'tactile_braille[sweep]' (or --ray no)")
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     done = {trial.name: archived(trial, archive) for trial in trials}

@@ -115,6 +115,10 @@ class PerturbedTaps:
         return {"procedure": self.name, **asdict(self)}
 
 
+MAX_GRID_TAPS = 1_000_000
+"""The most taps a grid collection may have (the paper's grids have about 15,000)."""
+
+
 @dataclass(frozen=True)
 class GridTaps:
     """A dense grid of taps over a task's work frame, at several depths.
@@ -169,6 +173,12 @@ class GridTaps:
                 raise ValueError(f"{name} must be (low, high) with low <= high, got {resolved[name]}")
         for name, value in resolved.items():
             object.__setattr__(self, name, value)
+        if len(self) > MAX_GRID_TAPS:
+            raise ValueError(
+                f"a grid of spacing {self.spacing_mm} mm and depth step {self.depth_step_mm} mm has "
+                f"{len(self):,} taps, more than the {MAX_GRID_TAPS:,} a dataset may hold "
+                "(10 KB each, in memory): choose coarser steps"
+            )
 
     @property
     def name(self) -> str:

@@ -72,6 +72,11 @@ class KeycapGeometry:
         for name, value in vars(self).items():
             if not value > 0:
                 raise ValueError(f"{name} must be positive, got {value!r}")
+        if self.resolution_mm < 0.01:
+            raise ValueError(
+                f"resolution_mm {self.resolution_mm} is finer than 0.01 mm, which no printer resolves "
+                "and whose mesh would not fit in memory"
+            )
         if self.socket_depth_mm >= self.hollow_height_mm:
             raise ValueError(
                 "socket_depth_mm must be less than hollow_height_mm (the column holds the socket)"
