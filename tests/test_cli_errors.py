@@ -63,3 +63,9 @@ def test_a_user_error_is_one_line_exit_2_and_writes_nothing(argv, message, tmp_p
     error = capsys.readouterr().err
     assert "Traceback" not in error and message in error.splitlines()[-1], error
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no run folder, dataset or .partial
+
+
+def test_keycaps_named_twice_are_written_and_reported_once(tmp_path, capsys):
+    assert main(["keycaps", "--keys", "A,a", "--out", str(tmp_path), "--resolution-mm", "0.5"]) == 0
+    assert "wrote 1 STL keycaps" in capsys.readouterr().out
+    assert len(list(tmp_path.glob("*.stl"))) == 1
