@@ -25,18 +25,15 @@ Run: python benchmarks/typing_protocols.py [--seeds 5]
 from __future__ import annotations
 
 import argparse
-import functools
-import itertools
 
 import gymnasium as gym
 import numpy as np
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.envs.core import _MOVES, _PRESS
 from tactile_braille.envs.oracle import oracle_action
-from tactile_braille.envs.tasks import KEY_GRIDS
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 from tactile_braille.evaluation.report import PAPER_TABLE
+from tactile_braille.evaluation.scoring import touch_optimum
 
 TASKS = ("DiscreteArrows-v0", "DiscreteAlphabet-v0", "ContinuousArrows-v0", "ContinuousAlphabet-v0")
 
@@ -57,48 +54,6 @@ class PoseOracle:
         move = offset / braille.task.max_move_mm
         reaches = np.abs(move).max() <= 1.0
         return np.array([*np.clip(move, -1, 1), 1.0 if reaches else -1.0], dtype=np.float32)
-
-
-def touch_optimum(keys: str, sequences) -> tuple[float, float]:
-    """Expected fewest steps of a touch-only policy over ``sequences`` on a discrete key grid:
-    (a reset per key, no reset), exact over uniform random start cells."""
-    grid = KEY_GRIDS[keys]
-    rows, columns = len(grid), len(grid[0])
-    cells = [(r, c) for r in range(rows) for c in range(columns)]
-
-    def move(cell, action):
-        dr, dc = _MOVES[action]
-        return min(max(cell[0] + dr, 0), rows - 1), min(max(cell[1] + dc, 0), columns - 1)
-
-    @functools.lru_cache(None)
-    def steps(belief: tuple, goal: str, depth: int) -> float:
-        """Total steps over the cells the sensor may be on (one each), acting on what each move feels."""
-        if all(grid[r][c] == goal for r, c in belief):
-            return len(belief)  # press
-        best = float("inf")
-        for action in range(_PRESS) if depth else ():
-            felt: dict[str, list] = {}
-            for cell in belief:
-                after = move(cell, action)
-                felt.setdefault(grid[after[0]][after[1]], []).append(after)
-            if list(felt.values()) != [list(belief)]:
-                total = sum(steps(tuple(sorted(b)), goal, depth - 1) for b in felt.values())
-                best = min(best, len(belief) + total)
-        return best
-
-    def from_start(goal: str) -> float:  # from a uniform random start, on touch alone
-        alike = {}
-        for r, c in cells:
-            alike.setdefault(grid[r][c], []).append((r, c))
-        return sum(steps(tuple(b), goal, rows + columns + 2) for b in alike.values()) / len(cells)
-
-    def from_key(key: str, goal: str) -> int:  # from where a press of ``key`` left the sensor, known
-        return min(abs(r - q) + abs(c - p) for r, c in cells if grid[r][c] == key
-                   for q, p in cells if grid[q][p] == goal) + 1  # fmt: skip
-
-    reset = sum(from_start(goal) for sequence in sequences for goal in sequence)
-    kept = sum(from_start(s[0]) + sum(from_key(a, b) for a, b in itertools.pairwise(s)) for s in sequences)
-    return reset, kept
 
 
 def main() -> None:
@@ -123,7 +78,8 @@ def main() -> None:
                           if platform == "sim" and t == task)  # fmt: skip
         cells = [f"{np.mean(v):.0f} ({min(v)}-{max(v)})" for v in steps.values()]
         if not env.unwrapped.task.continuous:  # the touch-only optimum, exact
-            reset, kept = touch_optimum(env.unwrapped.task.keys, sequences)
+            keys = env.unwrapped.task.keys
+            reset, kept = touch_optimum(keys, sequences, "released"), touch_optimum(keys, sequences, "paper")
             cells = [f"{cells[0]}; touch only >= {kept:.0f}", f"{cells[1]}; touch only {reset:.0f}"]
         print(f"| {task} | {cells[0]} | {cells[1]} | {np.mean(accuracy):.3f} | {paper} |")
 
