@@ -3,8 +3,8 @@
 ``tactile-braille leaderboard RESULTS... --output docs/leaderboard.md``.
 RESULTS are results files (docs/benchmark.md) or run folders and archived
 records (their ``result.json``, or one made from their typing evaluation).
-Per task, results are grouped by method, track and fingerprint (their seeds
-averaged), and ranked by typing accuracy, then by typing steps. A task's
+Per task, results are grouped by method, track, fingerprint and training
+budget (their seeds averaged), and ranked by typing accuracy, then by typing steps. A task's
 reference fingerprint is the one most of its results hold (or the one
 given); results under other conditions are listed apart with what differs,
 never ranked with the rest (or refused, with ``strict``).
@@ -60,11 +60,13 @@ class Row:
 
 
 def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
-    """Rows per task: results grouped by (method, track, fingerprint); one seed once per row."""
+    """Rows per task: results grouped by (method, track, fingerprint, training budget); one seed once
+    per row."""
     rows: dict[tuple, Row] = {}
     seeds: dict[tuple, dict] = {}
     for where, result in results:
-        key = (result["task"], result["method"], result["track"], result["fingerprint"])
+        budget = result["budget"].get("env_steps")
+        key = (result["task"], result["method"], result["track"], result["fingerprint"], budget)
         report = result["report"]
         if key not in rows:
             rows[key] = Row(result["method"], result["track"], result["fingerprint"], [], [], [],
