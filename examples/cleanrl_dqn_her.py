@@ -10,9 +10,11 @@ reward only (the ``tactile`` track), and is scored by
 
 Relabelling: any key press ends an episode and only that press achieves a
 goal, so the one informative hindsight goal is the key the episode ended on
-("final" and "future" strategies coincide); a sampled transition takes it as
-its goal with probability ``--her-fraction``, its reward recomputed by the
-environment's ``compute_reward``.
+("final" and "future" strategies coincide). ``--her sampled`` (default): a
+sampled transition takes it as its goal with probability ``--her-fraction``,
+its reward recomputed by the environment's ``compute_reward``. ``--her
+paper``: the paper's rule, an episode that ended on a wrong key is stored a
+second time with that key as its goal (no relabelling when sampling).
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ import tactile_braille  # noqa: F401 - registers the environments
 from tactile_braille.evaluation.results import make_result, write_result
 from tactile_braille.evaluation.scoring import evaluate_policy
 
+METHODS = {"sampled": "CleanRL-style DQN + HER", "paper": "CleanRL-style DQN + the paper's HER"}
+
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -47,7 +51,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument(
         "--exploration-fraction", type=float, default=0.3, help="of the run, epsilon 1 -> 0.05"
     )
-    parser.add_argument("--her-fraction", type=float, default=0.8)
+    parser.add_argument("--her", choices=("sampled", "paper"), default="sampled", help="the relabelling rule")
+    parser.add_argument("--her-fraction", type=float, default=0.8, help="--her sampled: relabelled share")
     parser.add_argument("--threads", type=int, default=1)
     return parser.parse_args(argv)
 
@@ -101,8 +106,19 @@ class EpisodeReplay:
         self.action[i], self.terminated[i] = action, terminated
         self.size += 1
 
-    def end_episode(self) -> None:
-        self.final[self.episode_start : self.size] = self.achieved[self.size - 1]
+    def end_episode(self, copy_wrong_press: bool = False) -> None:
+        """Close the episode; with ``copy_wrong_press`` (the paper's HER), an episode that ended on a key
+        other than its goal is stored again with that key as its goal."""
+        start, end = self.episode_start, self.size
+        self.final[start:end] = self.achieved[end - 1]
+        pressed, wanted = self.achieved[end - 1], self.goal[end - 1]
+        if copy_wrong_press and pressed.any() and not np.array_equal(pressed, wanted):
+            copy = slice(end, 2 * end - start)
+            for array in (self.image, self.next_image, self.previous, self.next_previous, self.achieved,
+                          self.action, self.terminated, self.final):  # fmt: skip
+                array[copy] = array[start:end]
+            self.goal[copy] = pressed
+            self.size = 2 * end - start
         self.episode_start = self.complete = self.size
 
     def sample(self, env: gym.Env, batch: int, her_fraction: float, rng: np.random.Generator) -> dict:
@@ -129,7 +145,8 @@ def train(args: argparse.Namespace) -> tuple[QNetwork, float]:
     q, target = QNetwork(env), QNetwork(env)
     target.load_state_dict(q.state_dict())
     optimizer = torch.optim.Adam(q.parameters(), lr=args.learning_rate)
-    replay = EpisodeReplay(env, args.steps)
+    replay = EpisodeReplay(env, 2 * args.steps if args.her == "paper" else args.steps)
+    her_fraction = args.her_fraction if args.her == "sampled" else 0.0
 
     start = time.perf_counter()
     observation, _ = env.reset(seed=args.seed)
@@ -141,11 +158,11 @@ def train(args: argparse.Namespace) -> tuple[QNetwork, float]:
         replay.add(observation, action, next_observation, terminated)
         observation = next_observation
         if terminated or truncated:
-            replay.end_episode()
+            replay.end_episode(copy_wrong_press=args.her == "paper")
             observation, _ = env.reset()
 
         if step >= args.learning_starts and replay.complete > 0:
-            data = replay.sample(env, args.batch_size, args.her_fraction, rng)
+            data = replay.sample(env, args.batch_size, her_fraction, rng)
             with torch.no_grad():
                 next_q = target(data["next_image"], data["next_previous"], data["goal"]).max(dim=1).values
                 td_target = data["reward"] + args.gamma * next_q * (1.0 - data["terminated"])
@@ -173,7 +190,7 @@ def main(argv=None) -> int:
     q, seconds = train(args)
     report = evaluate_policy(lambda observation: act(q, observation), args.task, dataset=args.dataset)
     result = make_result(
-        report, method="CleanRL-style DQN + HER", seed=args.seed, env_steps=args.steps,
+        report, method=METHODS[args.her], seed=args.seed, env_steps=args.steps,
         notes=f"examples/cleanrl_dqn_her.py; {seconds / 60:.1f} min on {args.threads} CPU thread(s)",
     )  # fmt: skip
     write_result(result, args.output)

@@ -73,3 +73,26 @@ def test_the_cleanrl_replay_relabels_with_the_key_an_episode_ended_on(env_datase
     assert rewarded.any() and np.all(rewarded == (hindsight["terminated"].numpy() == 1.0))
     as_asked = replay.sample(env, 64, her_fraction=0.0, rng=rng)
     assert np.all(as_asked["goal"].numpy() == up) and not as_asked["reward"].numpy().any()
+
+
+def test_the_cleanrl_papers_her_stores_a_wrong_press_again_with_the_pressed_key(env_datasets):
+    env = gym.make(ARROWS, dataset=env_datasets[ARROWS])
+    replay = _load("cleanrl_dqn_her").EpisodeReplay(env, 60)
+    up, down = (np.eye(4, dtype=np.float32)[ARROW_KEYS.index(k)] for k in ("UP", "DOWN"))
+    for wanted, copies in ((up, 2), (down, 1)):  # DOWN pressed when UP was wanted, then when DOWN was
+        start = replay.size
+        observation, _ = env.reset(seed=0, options={"goal_key": "DOWN"})
+        terminated = False
+        while not terminated:
+            action = oracle_action(env)
+            following, _, terminated, _, _ = env.step(action)
+            replay.add({**observation, "desired_goal": wanted}, action, following, terminated)
+            observation = following
+        length = replay.size - start
+        replay.end_episode(copy_wrong_press=True)
+        assert replay.size - start == copies * length
+    stored = replay.sample(env, 256, her_fraction=0.0, rng=np.random.default_rng(0))
+    rewarded = stored["reward"].numpy() == 1.0
+    # Rewarded: the last step of the copy (goal DOWN) and of the right press, never under goal UP.
+    assert rewarded.any() and np.all(stored["goal"].numpy()[rewarded] == down)
+    assert np.all(rewarded == (stored["terminated"].numpy() == 1.0) & (stored["goal"].numpy() == down).all(1))
