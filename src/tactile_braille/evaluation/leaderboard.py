@@ -136,8 +136,10 @@ _INTRO = (
     "the format and how to add your agent: [benchmark.md](benchmark.md). Each row is a method's mean over "
     "its training seeds (range in brackets), typing the paper's sequences under the paper's protocol "
     "(no reset between keys), ranked by accuracy, then by steps. *Touch-only optimum*: the fewest steps "
-    "any policy that knows only what it has felt can expect (discrete tasks; a lower bound under this "
-    "protocol). The paper's rows are its reported figures: its exact conditions cannot be fingerprinted, "
+    "a policy that knows only what it has felt can expect to type every key right in (discrete tasks; a "
+    "lower bound under this protocol; a policy that presses wrong keys early can take fewer). The "
+    "libraries' baselines and their budgets: [benchmark.md](benchmark.md#baselines-from-other-libraries). "
+    "The paper's rows are its reported figures: its exact conditions cannot be fingerprinted, "
     "and its steps were most likely counted with a reset per key (docs/evaluation.md)."
 )
 
