@@ -69,3 +69,32 @@ def test_keycaps_named_twice_are_written_and_reported_once(tmp_path, capsys):
     assert main(["keycaps", "--keys", "A,a", "--out", str(tmp_path), "--resolution-mm", "0.5"]) == 0
     assert "wrote 1 STL keycaps" in capsys.readouterr().out
     assert len(list(tmp_path.glob("*.stl"))) == 1
+
+
+@pytest.mark.parametrize(
+    ("error", "message"),
+    [
+        (OSError(28, "No space left on device"), "No space left on device"),
+        (PermissionError(13, "Permission denied"), "Permission denied"),
+    ],
+    ids=["disk full", "read-only folder"],
+)
+def test_a_full_disk_or_a_read_only_folder_during_a_run_is_one_line(
+    env_datasets, tmp_path, monkeypatch, capsys, error, message
+):
+    """The machine's faults end in one line too (raised here where the run writes its log: this suite
+    runs as root, for whom no folder is read-only)."""
+    import tactile_braille.agents.run as run_module
+
+    def failing(path, row):
+        raise error
+
+    monkeypatch.setattr(run_module, "append_progress", failing)
+    run = tmp_path / "run"
+    dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+    argv = ["train", "DiscreteArrows-v0", "--epochs", "1", "--steps-per-epoch", "30", "--start-steps", "10",
+            "--test-episodes", "1", "--threads", "1", "--dataset", dataset, "--run-dir", str(run),
+            "--quiet"]  # fmt: skip
+    assert main(argv) == 2
+    captured = capsys.readouterr().err
+    assert captured.count("\n") == 1 and message in captured and "Traceback" not in captured
