@@ -1,32 +1,38 @@
 #!/usr/bin/env bash
 # The leaderboard's rows from other libraries' agents: Stable-Baselines3 with HER on every task and the
-# single-file CleanRL-style DQN + HER on the discrete ones, at the budgets below (one CPU thread per run).
-# A results file that exists is kept, so a stopped run of this script goes on where it was.
-# Usage: examples/baselines.sh [FILTER]   (FILTER: part of a task or algorithm name; SEEDS="0 1 2")
+# single-file CleanRL-style DQN + HER on the discrete ones, at the budgets and seeds below (one CPU thread
+# per run). A results file that exists is kept, so a stopped run of this script goes on where it was.
+# Usage: examples/baselines.sh [FILTER]   (FILTER: part of a task or algorithm name)
 set -euo pipefail
 PY=${PY:-.venv/bin/python}
 OUT=${OUT:-results/leaderboard}
-SEEDS=${SEEDS:-0}
 FILTER=${1:-}
 
-run() {  # TASK ALGO ENV_STEPS
+run() {  # TASK ALGO ENV_STEPS SEEDS [FILE_SUFFIX]
     [[ -z $FILTER || "$1 $2" == *$FILTER* ]] || return 0
-    for seed in $SEEDS; do
-        if [[ $2 == cleanrl ]]; then
-            local file="$OUT/cleanrl/$1__dqn_her__$seed.json"
-            [[ -f $file ]] || "$PY" examples/cleanrl_dqn_her.py --task "$1" --steps "$3" --seed "$seed" --output "$file"
-        else
-            local file="$OUT/sb3/$1__$2__$seed.json"
-            [[ -f $file ]] || "$PY" examples/sb3_her.py "$1" "$2" --steps "$3" --seed "$seed" --output "$file"
-        fi
+    for seed in $4; do
+        case $2 in
+            cleanrl) file="$OUT/cleanrl/$1__dqn_her__$seed.json"
+                command=(examples/cleanrl_dqn_her.py --task "$1" --her sampled) ;;
+            cleanrl-paper) file="$OUT/cleanrl/$1__dqn_paper_her__$seed.json"
+                command=(examples/cleanrl_dqn_her.py --task "$1" --her paper) ;;
+            *) file="$OUT/sb3/$1__$2__$seed${5:-}.json"
+                command=(examples/sb3_her.py "$1" "$2") ;;
+        esac
+        [[ -f $file ]] || "$PY" "${command[@]}" --steps "$3" --seed "$seed" --output "$file"
     done
 }
 
-run DiscreteArrows-v0 dqn 6000
-run DiscreteArrows-v0 cleanrl 6000
-run DiscreteAlphabet-v0 dqn 15000
-run DiscreteAlphabet-v0 cleanrl 15000
-run ContinuousArrows-v0 sac 4000
-run ContinuousArrows-v0 td3 4000
-run ContinuousAlphabet-v0 sac 4000
-run ContinuousAlphabet-v0 td3 4000
+# Settings fixed before any run (seed 0). The paper's relabelling in the CleanRL-style script was added
+# after seed 0 of the sampled one: it is reported on fresh seeds only.
+run DiscreteArrows-v0 dqn 6000 0
+run DiscreteArrows-v0 dqn 20000 0 __20000steps
+run DiscreteArrows-v0 cleanrl 6000 0
+run DiscreteArrows-v0 cleanrl-paper 6000 "1 2"
+run DiscreteAlphabet-v0 dqn 15000 0
+run DiscreteAlphabet-v0 cleanrl 15000 0
+run DiscreteAlphabet-v0 cleanrl-paper 15000 1
+run ContinuousArrows-v0 sac 4000 0
+run ContinuousArrows-v0 td3 4000 0
+run ContinuousAlphabet-v0 sac 4000 0
+run ContinuousAlphabet-v0 td3 4000 0
