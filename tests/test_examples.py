@@ -50,19 +50,23 @@ def test_the_cleanrl_style_script_trains_scores_and_writes_a_results_file(env_da
     assert result["budget"]["env_steps"] == 60 and result["report"]["keys_asked"] == 96
 
 
-def test_the_cleanrl_replay_relabels_with_the_key_an_episode_ended_on(env_datasets):
-    env = gym.make(ARROWS, dataset=env_datasets[ARROWS])
-    replay = _load("cleanrl_dqn_her").EpisodeReplay(env, 30)
-    up, down = (np.eye(4, dtype=np.float32)[ARROW_KEYS.index(k)] for k in ("UP", "DOWN"))
-    # An episode that wanted UP but ended on DOWN (the pose oracle drives to DOWN).
+def record_a_press_of_down(env, replay, wanted: np.ndarray) -> None:
+    """An episode driven by the pose oracle to DOWN and pressing it, stored with ``wanted`` as its goal."""
     observation, _ = env.reset(seed=0, options={"goal_key": "DOWN"})
     terminated = False
     while not terminated:
         action = oracle_action(env)
         following, _, terminated, truncated, _ = env.step(action)
-        replay.add({**observation, "desired_goal": up}, action, following, terminated)
+        replay.add({**observation, "desired_goal": wanted}, action, following, terminated)
         observation = following
         assert not truncated
+
+
+def test_the_cleanrl_replay_relabels_with_the_key_an_episode_ended_on(env_datasets):
+    env = gym.make(ARROWS, dataset=env_datasets[ARROWS])
+    replay = _load("cleanrl_dqn_her").EpisodeReplay(env, 30)
+    up, down = (np.eye(4, dtype=np.float32)[ARROW_KEYS.index(k)] for k in ("UP", "DOWN"))
+    record_a_press_of_down(env, replay, wanted=up)  # an episode that wanted UP but ended on DOWN
     replay.end_episode()
     np.testing.assert_array_equal(replay.final[: replay.size], np.tile(down, (replay.size, 1)))
     rng = np.random.default_rng(0)
@@ -81,13 +85,7 @@ def test_the_cleanrl_papers_her_stores_a_wrong_press_again_with_the_pressed_key(
     up, down = (np.eye(4, dtype=np.float32)[ARROW_KEYS.index(k)] for k in ("UP", "DOWN"))
     for wanted, copies in ((up, 2), (down, 1)):  # DOWN pressed when UP was wanted, then when DOWN was
         start = replay.size
-        observation, _ = env.reset(seed=0, options={"goal_key": "DOWN"})
-        terminated = False
-        while not terminated:
-            action = oracle_action(env)
-            following, _, terminated, _, _ = env.step(action)
-            replay.add({**observation, "desired_goal": wanted}, action, following, terminated)
-            observation = following
+        record_a_press_of_down(env, replay, wanted)
         length = replay.size - start
         replay.end_episode(copy_wrong_press=True)
         assert replay.size - start == copies * length
