@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     report = evaluate_policy(
         lambda observation: model.predict(observation, deterministic=True)[0], args.task, dataset=args.dataset
     )
-    method = f"SB3 {args.algo.upper()} + HER ({seconds / 60:.0f} min on 1 CPU thread)"
+    method = f"SB3 {args.algo.upper()} + HER ({seconds / 60:.0f} min on {args.threads} CPU thread(s))"
     result = make_result(
         report, method=f"SB3 {args.algo.upper()} + HER", seed=args.seed, env_steps=args.steps,
         notes=f"examples/sb3_her.py; {method}",

@@ -389,8 +389,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         return _evaluate_policy(args)
     from tactile_braille.evaluation.runs import RESULT_FILE, evaluate_typing
 
-    for flag in ("method", "output", "train_seed", "env_steps", "epochs", "track", "dataset"):
-        if getattr(args, flag) is not None:
+    for flag in ("method", "output", "train_seed", "env_steps", "epochs", "track", "dataset", "protocol",
+                 "backend", "overwrite"):  # fmt: skip
+        if getattr(args, flag) not in (None, False):
             raise ValueError(
                 f"--{flag.replace('_', '-')} is for --policy; a run's results file takes its own"
             )
@@ -418,13 +419,14 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
         raise ValueError(f"--policy scores one TASK, got {len(args.targets)} targets")
     if args.method is None or args.output is None:
         raise ValueError("--policy needs --method NAME (free text) and --output FILE.json")
-    if args.output.exists() and not args.overwrite:
-        raise FileExistsError(f"{args.output} exists; choose another name or pass --overwrite")
     if args.output.is_dir():
         raise ValueError(f"--output {args.output} is a folder; name the results file (e.g. result.json)")
+    if args.output.exists() and not args.overwrite:
+        raise FileExistsError(f"{args.output} exists; choose another name or pass --overwrite")
     policy = load_policy(args.policy)
     report = evaluate_policy(
-        policy, str(args.targets[0]), protocol=args.protocol, backend=args.backend, seed=args.seed,
+        policy, str(args.targets[0]), protocol=args.protocol or "paper", backend=args.backend or "dataset",
+        seed=args.seed,
         track=args.track or "tactile", dataset=args.dataset, sentences=not args.no_sentences,
     )  # fmt: skip
     result = make_result(report, method=args.method, seed=args.train_seed, env_steps=args.env_steps,
@@ -670,11 +672,10 @@ def _add_evaluate_command(commands) -> None:
     evaluate.add_argument(
         "--protocol",
         choices=("paper", "released"),
-        default="paper",
-        help="--policy: no reset between keys (paper) or a reset per key (released)",
+        help="--policy: no reset between keys (paper, the default) or a reset per key (released)",
     )
     evaluate.add_argument(
-        "--backend", choices=BACKENDS, default="dataset", help="--policy: observations' source"
+        "--backend", choices=BACKENDS, help="--policy: observations' source (default: dataset)"
     )
     evaluate.add_argument(
         "--dataset", type=Path, help="--policy: the dataset backend's file (default: cached)"

@@ -126,6 +126,7 @@ def test_a_damaged_checkpoint_or_replay_is_refused_in_one_line(finished_run, cap
     assert main(resume(finished_run, "--epochs", "2")) == 2
     assert message in one_line_error(capsys)
     assert (finished_run / "progress.csv").read_text() == progress
+    assert read_config(finished_run).epochs == 1  # the refused resume recorded none of its settings
 
 
 def _truncate(path: Path) -> None:

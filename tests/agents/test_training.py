@@ -706,8 +706,13 @@ def test_report_and_typing_evaluate_a_touch_run_on_images(touch_runs, algo):
     result = read_result(run / RESULT_FILE)
     assert result["track"] == "proprio" and result["fingerprint"] == typing["fingerprint"]
     assert result["report"]["accuracy"] == typing["accuracy"] and result["budget"]["epochs"] == 1
-    # A record archived before results files existed gets its results file made from typing.json.
+    # A results file written with its typing.json is not guessed when lost ...
     (run / RESULT_FILE).unlink()
+    with pytest.raises(ValueError, match=r"lacks the result\.json of its typing evaluation"):
+        run_result(run)
+    # ... but a record archived before results files existed gets one made from its typing.json.
+    old = {k: v for k, v in typing.items() if k not in ("fingerprint", "typing_seed", "touch_optimum")}
+    (run / "typing.json").write_text(json.dumps(old))
     derived = run_result(run)
     assert derived["report"]["conditions"] == {
         **result["report"]["conditions"],

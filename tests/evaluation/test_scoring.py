@@ -196,6 +196,13 @@ def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tm
     # With the released protocol as the reference, the others go apart instead.
     page = leaderboard_markdown(results, reference={"DiscreteArrows-v0": results[3][1]["fingerprint"]})
     assert "| 1 | press, reset per key | tactile |" in page.split("### Under other conditions")[0]
+    # As the page shows it: 12 characters, and the task with its namespace.
+    short = {"tactile_braille/DiscreteArrows-v0": results[3][1]["fingerprint"][:12]}
+    assert leaderboard_markdown(results, reference=short) == page
+    for bad, message in (({"DiscreteArrows-v0": "not-hex"}, "matches 0 of its results' fingerprints"),
+                         ({"Typing-v0": "0000"}, "no result of that task")):  # fmt: skip
+        with pytest.raises(ValueError, match=message):
+            leaderboard_markdown(results, reference=bad)
     with pytest.raises(ValueError, match=r"e\.json repeats seed 0 of b\.json"):
         leaderboard_markdown([*results, ("e.json", results[1][1])])
 

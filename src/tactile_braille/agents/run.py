@@ -68,8 +68,9 @@ def run_folder(config: TrainConfig | None, run_dir: str | Path | None, resume: b
 
 def open_run(config: TrainConfig | None, run_dir: Path, resume: bool, rig=None) -> TrainConfig:
     """The run's settings: for a resume, the stored ones (with ``config``'s machine settings, if given:
-    any other difference is refused); else ``config``, written to the new folder (after it is checked
-    against the ``rig`` handed in, if any). Call it holding the run's lock (:data:`LOCK_FILE`)."""
+    any other difference is refused; :func:`write_config` records them once the resume is under way);
+    else ``config``, written to the new folder (after it is checked against the ``rig`` handed in, if
+    any). Call it holding the run's lock (:data:`LOCK_FILE`)."""
     if resume:
         stored = read_config(run_dir)
         for stale in [*run_dir.glob(".*.tmp"), *run_dir.glob("snapshots/.*.tmp")]:
@@ -77,18 +78,23 @@ def open_run(config: TrainConfig | None, run_dir: Path, resume: bool, rig=None) 
         config = stored if config is None else _resumed(run_dir, stored, config)
         config.check_rig(rig)
         check_resumable(run_dir, config)
-        if config != stored:
-            with atomic_path(run_dir / CONFIG_FILE) as temporary:
-                temporary.write_text(json.dumps(config.to_json(), indent=2))
         return config
     config = config or TrainConfig()
     config.check_rig(rig)
     if (run_dir / CONFIG_FILE).exists():
         raise FileExistsError(f"{run_dir} holds a run already; resume it or choose another folder")
     run_dir.mkdir(parents=True, exist_ok=True)
-    with atomic_path(run_dir / CONFIG_FILE) as temporary:
-        temporary.write_text(json.dumps(config.to_json(), indent=2))
+    write_config(run_dir, config)
     return config
+
+
+def write_config(run_dir: Path, config: TrainConfig) -> None:
+    """Record the run's settings (atomically), where they are not recorded already."""
+    path = run_dir / CONFIG_FILE
+    if path.exists() and read_config(run_dir) == config:
+        return
+    with atomic_path(path) as temporary:
+        temporary.write_text(json.dumps(config.to_json(), indent=2))
 
 
 def _resumed(run_dir: Path, stored: TrainConfig, wanted: TrainConfig) -> TrainConfig:

@@ -31,12 +31,14 @@ from tactile_braille.agents.run import (
     Counters,
     EpochLog,
     open_run,
+    read_config,
     record_world,
     restore_checkpoint,
     run_folder,
     save_checkpoint,
     save_snapshot,
     snapshot_epochs,
+    write_config,
 )
 from tactile_braille.agents.sac import SACAgent
 from tactile_braille.agents.sac_discrete import DiscreteSACAgent
@@ -75,7 +77,9 @@ def train(
     The run's folder is locked for the call: a second writer is refused (``LockedError``).
     """
     run_dir = run_folder(config, run_dir, resume)
-    if not resume:  # a new run's folder is made only for settings that can run
+    if resume:
+        read_config(run_dir)  # a folder that holds no run is refused before its lock is made
+    else:  # a new run's folder is made only for settings that can run
         (config or TrainConfig()).check_rig(rig)
     if config is not None:
         check_device(config.device)
@@ -95,6 +99,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
     buffer = make_replay(config, env)
     rng = np.random.default_rng(config.seed)
     counters = restore_checkpoint(run_dir, agent, buffer, rng) if resume else Counters()
+    write_config(run_dir, config)  # a resume's new epochs or machine, once its world and checkpoint are read
     extension = make_extension(config, env, agent, buffer, run_dir)
     episodes = Episodes(env, buffer, extension, rng)
     burst, batch_size = config.update_every * config.updates_per_step, config.agent.batch_size

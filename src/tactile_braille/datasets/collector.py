@@ -84,6 +84,10 @@ def collect(
                 name_index[spec.label or pressed],
                 name_index[pressed],
             )
-    finally:
+        writer.flush()
+        return writer.finalize()
+    except BaseException:
         writer.flush()  # keep what was collected when a rig fault or Ctrl-C stops us
-    return writer.finalize()
+        raise
+    finally:
+        writer.close()  # let a retry (in this process too) take the dataset

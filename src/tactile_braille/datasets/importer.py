@@ -175,6 +175,10 @@ def import_original(
                     raise DatasetError(f"{source}: unknown key {key!r}")
             image = process_frame(read_video_frame(videos_dir / row["sensor_video"], frame_index), processing)
             writer.add(index, image, (x, y, depth, yaw), name_index[label], name_index[pressed])
-    finally:
         writer.flush()
-    return writer.finalize()
+        return writer.finalize()
+    except BaseException:
+        writer.flush()  # keep what was imported
+        raise
+    finally:
+        writer.close()  # let a retry (in this process too) take the dataset

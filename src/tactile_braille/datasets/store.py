@@ -334,8 +334,8 @@ class DatasetWriter:
         merged = {name: values[order] for name, values in merged.items()}
         _validate_arrays(merged, self.metadata, self.path)
         _write_arrays(self.path, merged, self.metadata, compress=True)
-        self.close()
         shutil.rmtree(self.partial)
+        self.close()
         return self.path
 
     def close(self) -> None:

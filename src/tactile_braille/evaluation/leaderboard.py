@@ -85,6 +85,22 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
     return per_task
 
 
+def _references(given: dict[str, str], results) -> dict[str, str]:
+    """Each task's chosen fingerprint, whole: a prefix must match exactly one of the task's results."""
+    resolved = {}
+    for task, prefix in given.items():
+        name = task.removeprefix("tactile_braille/")
+        held = sorted({r["fingerprint"] for _, r in results if r["task"] == name})
+        if not held:
+            raise ValueError(f"--reference {task}: no result of that task is given")
+        hits = [f for f in held if f.startswith(prefix)]
+        if len(hits) != 1:
+            raise ValueError(f"--reference {task}={prefix} matches {len(hits)} of its results' fingerprints "
+                             f"({', '.join(f[:12] for f in held)})")  # fmt: skip
+        resolved[name] = hits[0]
+    return resolved
+
+
 def _conditions(results, task: str) -> dict[str, dict]:
     return {r["fingerprint"]: r["report"]["conditions"] for _, r in results if r["task"] == task}
 
@@ -95,13 +111,15 @@ def leaderboard_markdown(
     reference: dict[str, str] | None = None,
     strict: bool = False,
 ) -> str:
-    """The leaderboard page (the module docstring). ``reference``: task -> fingerprint to rank under."""
+    """The leaderboard page (the module docstring). ``reference``: task -> fingerprint (or a prefix of
+    one, as the page shows them) to rank under."""
+    reference = _references(reference or {}, results)
     per_task = _rows(results)
     order = [*TASK_NAMES, *sorted(set(per_task) - set(TASK_NAMES))]
     lines = [f"# {title}", "", _INTRO, ""]
     for task in (t for t in order if t in per_task):
         counts = Counter(f for _, r in results if r["task"] == task for f in [r["fingerprint"]])
-        chosen = (reference or {}).get(task) or min(counts, key=lambda f: (-counts[f], f))
+        chosen = reference.get(task) or min(counts, key=lambda f: (-counts[f], f))
         apart = [row for row in per_task[task] if row.fingerprint != chosen]
         if strict and apart:
             where = next(w for w, r in results if r["task"] == task and r["fingerprint"] != chosen)

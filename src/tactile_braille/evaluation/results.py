@@ -16,6 +16,8 @@ from tactile_braille.evaluation.scoring import TRACKS, TypingReport, fingerprint
 
 RESULT_FORMAT = "tactile_braille.result/1"
 REQUIRED = ("format", "method", "task", "track", "seed", "budget", "fingerprint", "report")
+CONDITIONS = {"task", "protocol", "sequences", "max_episode_steps", "start_seed", "world", "project_version"}
+"""What a report's conditions (what its fingerprint hashes) must name."""
 
 
 def make_result(
@@ -85,4 +87,11 @@ def check_result(result, where: str) -> dict:
         raise ValueError(f"{where}: its fingerprint does not match the conditions it records (edited?)")
     if (report.task, report.track) != (result["task"], result["track"]):
         raise ValueError(f"{where}: its task or track differs from its report's")
+    conditions = report.conditions
+    if not isinstance(conditions, dict) or not set(conditions) >= CONDITIONS:
+        raise ValueError(f"{where}: its report's conditions lack what a fingerprint covers")
+    if (conditions["task"], conditions["protocol"]) != (report.task, report.protocol):
+        raise ValueError(f"{where}: its task or protocol differs from the conditions it was scored under")
+    if not isinstance(result["budget"], dict):
+        raise ValueError(f"{where}: budget must be an object with env_steps and epochs")
     return result

@@ -50,7 +50,8 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
 
     run_dir = Path(run_dir)
     config, env, agent = load_run(run_dir)
-    epoch = int(torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")["epoch"])
+    state = torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")
+    epoch, env_steps = int(state["epoch"]), int(state["env_steps"])  # what the scored policy trained
     report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=sentences)
     released = evaluate_policy(
         agent, config.task, env=env, track=config.track, seed=seed, protocol="released", sentences=False
@@ -68,9 +69,8 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
                           f"{report.total_steps} steps")  # fmt: skip
     with atomic_path(run_dir / "typing.json") as temporary:
         temporary.write_text(json.dumps(output, indent=2))
-    rows = read_progress(run_dir)
-    result = make_result(report, method=run_method(config), seed=config.seed, epochs=len(rows),
-                         env_steps=int(rows[-1]["env_steps"]) if rows else 0)  # fmt: skip
+    result = make_result(report, method=run_method(config), seed=config.seed, epochs=epoch + 1,
+                         env_steps=env_steps)  # fmt: skip
     write_result(result, run_dir / RESULT_FILE, overwrite=True)
     return output
 
@@ -100,6 +100,9 @@ def run_result(run_dir) -> dict:
     if not typing_file.exists():
         raise ValueError(f"{run_dir} has no typing evaluation: run `tactile-braille evaluate {run_dir}`")
     typing = json.loads(typing_file.read_text())
+    if "fingerprint" in typing:  # written with its result.json, which is gone: not to be guessed
+        raise ValueError(f"{run_dir} lacks the result.json of its typing evaluation: run "
+                         f"`tactile-braille evaluate {run_dir}` again")  # fmt: skip
     if typing.get("checkpoint_epoch") != len(rows) - 1:
         raise ValueError(
             f"{run_dir}: its typing evaluation is of epoch {typing.get('checkpoint_epoch')}, not of its "

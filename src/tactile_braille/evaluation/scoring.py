@@ -105,6 +105,7 @@ def load_policy(spec: str) -> Callable:
     """The callable ``NAME`` of ``MODULE:NAME``; MODULE is an importable module or a ``.py`` file."""
     import importlib
     import importlib.util
+    import sys
     from pathlib import Path
 
     module_name, _, name = spec.rpartition(":")
@@ -119,6 +120,7 @@ def load_policy(spec: str) -> Callable:
                 raise ValueError(f"policy file {path} does not exist")
             loader = importlib.util.spec_from_file_location(path.stem, path)
             module = importlib.util.module_from_spec(loader)
+            sys.modules[path.stem] = module  # as an import would: dataclasses and pickling look it up
             loader.loader.exec_module(module)
         else:
             module = importlib.import_module(module_name)
