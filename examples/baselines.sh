@@ -28,7 +28,7 @@ run() {  # TASK ALGO ENV_STEPS SEEDS [FILE_SUFFIX]
 run DiscreteArrows-v0 dqn 6000 0
 run DiscreteArrows-v0 dqn 20000 0 __20000steps
 run DiscreteArrows-v0 cleanrl 6000 0
-run DiscreteArrows-v0 cleanrl-paper 6000 "1 2"
+run DiscreteArrows-v0 cleanrl-paper 6000 "1 2 3 4"
 run DiscreteAlphabet-v0 dqn 15000 0
 run DiscreteAlphabet-v0 cleanrl 15000 0
 run DiscreteAlphabet-v0 cleanrl-paper 15000 1
