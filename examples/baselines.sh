@@ -25,7 +25,7 @@ run() {  # TASK ALGO ENV_STEPS SEEDS [FILE_SUFFIX]
 
 # Settings fixed before any run (seed 0). The paper's relabelling in the CleanRL-style script was added
 # after seed 0 of the sampled one: it is reported on fresh seeds only.
-run DiscreteArrows-v0 dqn 6000 0
+run DiscreteArrows-v0 dqn 6000 "0 1 2"
 run DiscreteArrows-v0 dqn 20000 0 __20000steps
 run DiscreteArrows-v0 cleanrl 6000 0
 run DiscreteArrows-v0 cleanrl-paper 6000 "1 2 3 4"
