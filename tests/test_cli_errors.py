@@ -38,6 +38,7 @@ CASES = {
     "resume a mistyped folder": (["train", "--resume", "{tmp}/typo"], "is not a resumable run"),
     "evaluate a run with --protocol": (["evaluate", "{tmp}", "--protocol", "released"],
                                        "--protocol is for --policy"),
+    "evaluate a run with --epochs 0": (["evaluate", "{tmp}", "--epochs", "0"], "--epochs is for --policy"),
     "collect a grid of 0.001 mm": (["collect", "--procedure", "grid", "--keys", "arrows", "--spacing-mm",
                                     "0.001", "--output", "{tmp}/g.h5"], "taps, more than the 1,000,000"),
     "keycaps --resolution-mm 0.0001": (["keycaps", "--resolution-mm", "0.0001", "--out", "{tmp}/caps"],

@@ -391,7 +391,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     for flag in ("method", "output", "train_seed", "env_steps", "epochs", "track", "dataset", "protocol",
                  "backend", "overwrite"):  # fmt: skip
-        if getattr(args, flag) not in (None, False):
+        if getattr(args, flag) is not None and getattr(args, flag) is not False:  # --epochs 0 counts
             raise ValueError(
                 f"--{flag.replace('_', '-')} is for --policy; a run's results file takes its own"
             )

@@ -242,7 +242,10 @@ class DatasetWriter:
             if restart and existed:  # the lock is held: no other writer is using what goes
                 for item in self.partial.iterdir():
                     if item.name != ".lock":
-                        shutil.rmtree(item) if item.is_dir() else item.unlink()
+                        if item.is_dir():
+                            shutil.rmtree(item)
+                        else:
+                            item.unlink()
             self._open_partial(existed and manifest.exists() and not restart, resume)
         except BaseException:
             self._lock.close()
