@@ -30,30 +30,12 @@ import gymnasium as gym
 import numpy as np
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.envs.oracle import oracle_action
+from tactile_braille.envs.oracle import PoseScript
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 from tactile_braille.evaluation.report import PAPER_TABLE
 from tactile_braille.evaluation.scoring import touch_optimum
 
 TASKS = ("DiscreteArrows-v0", "DiscreteAlphabet-v0", "ContinuousArrows-v0", "ContinuousAlphabet-v0")
-
-
-class PoseOracle:
-    """Acts on the true pose through the agents' interface (moves and presses in one step where it can)."""
-
-    def __init__(self, env: gym.Env) -> None:
-        self.env = env
-
-    def policy_action(self, observation, step, explore, rng, deterministic=False):
-        braille = self.env.unwrapped
-        if not braille.task.continuous:
-            return oracle_action(self.env)
-        core = braille._core
-        goal = braille.goal_keys[int(core.goal[0])]
-        offset = np.array(core.layout.centre_mm(goal)) - braille.task.frame_origin_mm - core.position_mm[0]
-        move = offset / braille.task.max_move_mm
-        reaches = np.abs(move).max() <= 1.0
-        return np.array([*np.clip(move, -1, 1), 1.0 if reaches else -1.0], dtype=np.float32)
 
 
 def main() -> None:
@@ -66,7 +48,7 @@ def main() -> None:
     for task in TASKS:
         env = gym.make(f"tactile_braille/{task}")
         sequences = paper_sequences("arrows" if "Arrows" in task else "alphabet")
-        oracle = PoseOracle(env)
+        oracle = PoseScript(env)
         steps, accuracy = {}, []
         for protocol in ("paper", "released"):
             results = [

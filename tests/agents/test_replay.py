@@ -26,6 +26,7 @@ import feature_agents
 import replay_helpers
 from replay_helpers import FEATURES, GOALS, Frames, as_images, replay_observation
 from tactile_braille.agents import replay as after
+from tactile_braille.agents.replay import FRAME_LABELS
 from tactile_braille.agents.replay import (
     FRAME_LABELS,
     PACKED_BYTES,
@@ -408,7 +409,7 @@ def test_a_file_without_pressed_keys_loads_them_as_unknown(tmp_path):
 PROJECTION = np.random.default_rng(7).normal(size=(100 * 100, FEATURES)).astype(np.float32)
 
 
-def encode(images: np.ndarray) -> np.ndarray:
+def encode(images: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
     """A fixed random projection of (B, 1, 100, 100) uint8 images (one row at a time: exact per image)."""
     assert images.dtype == np.uint8 and images.shape[1:] == (1, 100, 100)
     flat = images.reshape(len(images), -1).astype(np.float32) / 255.0
@@ -421,7 +422,8 @@ class ScaledEncoder:
     def __init__(self, scale: float = 1.0) -> None:
         self.scale, self.calls = scale, []
 
-    def __call__(self, images: np.ndarray) -> np.ndarray:
+    def __call__(self, images: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        assert labels.shape == (len(images), FRAME_LABELS)  # each frame's labels (NaN: none) come along
         self.calls.append(len(images))
         return self.scale * encode(images)
 
@@ -492,12 +494,12 @@ def test_set_encoder_again_recomputes_the_cache_after_a_refit():
     )
 
     # Another encoder, of another size, takes over.
-    def wider(images):
+    def wider(images, labels):
         return np.concatenate([encode(images), np.ones((len(images), 1), np.float32)], axis=1)
 
     buffer.set_encoder(wider, FEATURES + 1)
     assert buffer.sample(10, np.random.default_rng(6))["images"].shape == (10, FEATURES + 1)
-    np.testing.assert_allclose(buffer.features[: FRAMES + 1], wider(as_images(frames.given)), atol=1e-6)
+    np.testing.assert_allclose(buffer.features[: FRAMES + 1], wider(as_images(frames.given), None), atol=1e-6)
 
 
 def test_set_encoder_and_labelled_frames_are_refused_for_a_buffer_of_features():
@@ -680,13 +682,13 @@ VECTOR = 7
 ACTIONS = 2
 
 
-def block_sums(images: np.ndarray) -> np.ndarray:
+def block_sums(images: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
     """Features of (B, 1, 100, 100) images: the white pixels of a 4x4 grid of blocks (exact floats)."""
     blocks = (images.reshape(len(images), 4, 25, 4, 25) > 0).sum(axis=(2, 4))
     return blocks.reshape(len(images), 16).astype(np.float32)
 
 
-def halved_block_sums(images: np.ndarray) -> np.ndarray:
+def halved_block_sums(images: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
     """Another encoder (a refit), of the same size."""
     return 0.5 * block_sums(images)
 
@@ -1003,7 +1005,7 @@ def test_a_buffer_of_small_images_samples_saves_and_encodes_them(tmp_path):
     assert buffer.labelled_frames()[0].shape == (2, 1, 12, 8)
     buffer.save(tmp_path / "small.npz")
     restored = EpisodeReplayBuffer(10, GOALS, (), PREVIOUS, observation_shape=(12, 8, 1), relabel="all")
-    restored.set_encoder(lambda images: images.reshape(len(images), -1)[:, :3].astype(np.float32), 3)
+    restored.set_encoder(lambda images, labels=None: images.reshape(len(images), -1)[:, :3].astype(np.float32), 3)
     restored.load(tmp_path / "small.npz")
     features = restored.sample(4, np.random.default_rng(1))["images"]
     np.testing.assert_array_equal(features, batch["images"].reshape(4, -1)[:, :3])

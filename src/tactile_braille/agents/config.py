@@ -298,6 +298,9 @@ class TouchConfig:
             key probabilities, whose meaning survives a refit).
         goal_positions: the agent also sees where its goal key lies on the calibrated layout, in the
             coordinates of the pose the encoder learns.
+        pose_inputs: the agent (actor and critics) also sees the arm's pose at each tap, in the same
+            coordinates: the environment is made with ``proprio=True`` and its observations carry
+            ``sensor_pose``.
         refits: refits on all labelled frames so far, every ``refit_every`` steps after the first fit
             (each as many gradient steps as the first fit).
         refit_every: environment steps between refits (None: ``start_steps``).
@@ -307,6 +310,7 @@ class TouchConfig:
     epochs: int = 40
     inputs: TouchInputs = "features"
     goal_positions: bool = False
+    pose_inputs: bool = False
     refits: int = 0
     refit_every: int | None = None
 
@@ -442,6 +446,7 @@ class TrainConfig:
             "agent.critic_pose": getattr(self.agent, "critic_pose", False),
             "touch.inputs='readout'": touch.inputs != "features",
             "touch.goal_positions": touch.goal_positions,
+            "touch.pose_inputs": touch.pose_inputs,
         }
         for name, wanted in needs_encoder.items():
             if wanted and not touch.enabled:
@@ -488,6 +493,7 @@ def proprio_settings(config: TrainConfig) -> dict[str, str]:
         ("touch.enabled", config.touch.enabled,
          "labels every frame with the arm's pose and the keys the calibrated layout places there"),
         ("touch.goal_positions", config.touch.goal_positions, "places the goal on the calibrated key layout"),
+        ("touch.pose_inputs", config.touch.pose_inputs, "shows the agent the arm's pose"),
         ("agent.critic_pose", getattr(config.agent, "critic_pose", False),
          "shows the critics the arm's pose"),
     )  # fmt: skip

@@ -60,7 +60,7 @@ PACKED_BYTES = 100 * 100 // 8
 FRAME_LABELS = 5
 """Labels of a frame: sensor x, y, depth (mm), pressed key, key under the sensor."""
 
-Encoder = Callable[[np.ndarray], np.ndarray]
+Encoder = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """(B, 1, H, W) uint8 images -> (B, size) float32 features."""
 
 
@@ -199,13 +199,14 @@ class FeatureCache:
         written = self.store.written_slots()
         for start in range(0, len(written), batch_size):
             slots = written[start : start + batch_size]
-            features[slots] = encode(self.store.observations(slots))
+            features[slots] = encode(self.store.observations(slots), self.store.labels[slots])
         self.features, self.encode = features, encode
 
     def add(self, slot: int) -> None:
         """Compute the feature of a newly stored frame (nothing without an encoder)."""
         if self.encode is not None:
-            self.features[slot] = self.encode(self.store.observations(np.array([slot])))[0]
+            slots = np.array([slot])
+            self.features[slot] = self.encode(self.store.observations(slots), self.store.labels[slots])[0]
 
     def lookup(self, slots: np.ndarray) -> np.ndarray:
         """The features (B, size) of ``slots``."""
@@ -535,8 +536,9 @@ class EpisodeReplayBuffer:
     def set_encoder(self, encode: Encoder, size: int, batch_size: int = 1024) -> None:
         """From now on, batches hold ``encode``'s features of the stored images (recomputed now).
 
-        ``encode`` takes (B, 1, H, W) uint8 images and returns (B, size)
-        float32 features. Call it again after the encoder changed.
+        ``encode`` takes (B, 1, H, W) uint8 images and their frames' labels (B, FRAME_LABELS; NaN
+        where unlabelled) and returns (B, size) float32 features. Call it again after the encoder
+        changed.
         """
         self.cache.set(encode, size, batch_size)
 

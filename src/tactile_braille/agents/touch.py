@@ -28,6 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 from tactile_braille.agents.config import TOUCH_INPUTS
+from tactile_braille.envs.core import PROPRIO_KEY
 from tactile_braille.supervised.touch import TouchEncoder
 
 
@@ -52,6 +53,9 @@ class TouchAgent:
         key_positions_mm: (keys, 2) goal key centres, or None for the one-hot alone.
         inputs: what the agent learns on: the encoder's ``"features"`` or its ``"readout"``
             (:meth:`TouchEncoder.read`).
+        pose_inputs: the agent also sees the arm's pose (the ``proprio`` observation's
+            ``sensor_pose``; in the replay, each frame's labelled pose), standardised as the
+            encoder's pose targets.
     """
 
     def __init__(
@@ -60,6 +64,7 @@ class TouchAgent:
         encoder: TouchEncoder,
         key_positions_mm: np.ndarray | None = None,
         inputs: str = "features",
+        pose_inputs: bool = False,
     ) -> None:
         if inputs not in TOUCH_INPUTS:
             raise ValueError(f"inputs must be one of {TOUCH_INPUTS}, got {inputs!r}")
@@ -67,7 +72,8 @@ class TouchAgent:
         self.device, self.config, self.precision = agent.device, agent.config, agent.precision
         self.fitted = False
         self.inputs = inputs
-        self.input_size = touch_input_size(encoder, inputs)
+        self.pose_inputs = bool(pose_inputs)
+        self.input_size = touch_input_size(encoder, inputs, pose_inputs)
         self.key_positions_mm = None
         if key_positions_mm is not None:
             positions = np.asarray(key_positions_mm, dtype=np.float32)
@@ -87,17 +93,33 @@ class TouchAgent:
         positions = self.touch.standardise(self.key_positions_mm)
         return np.concatenate([goals, (goals @ positions).astype(np.float32)], axis=-1)  # zeros: no goal
 
-    def encode(self, images: np.ndarray) -> np.ndarray:
-        """What the agent learns on, of a batch of images: the encoder's features or its readout."""
-        return self.touch.encode(images) if self.inputs == "features" else self.touch.read(images)
+    def encode(self, images: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
+        """What the agent learns on, of a batch of images: the encoder's features or its readout,
+        followed with ``pose_inputs`` by the standardised pose of the frames' ``labels`` (B, >= 3)."""
+        vectors = self.touch.encode(images) if self.inputs == "features" else self.touch.read(images)
+        if not self.pose_inputs:
+            return vectors
+        poses = None if labels is None else np.asarray(labels, dtype=np.float32)[:, :3]
+        if poses is None or np.isnan(poses).any():
+            raise ValueError("an agent with pose inputs needs the arm's pose of every frame it encodes")
+        return np.concatenate([vectors, self.touch.standardise(poses)], axis=-1)
 
     def features(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The observation with its image replaced by :meth:`encode`'s vector (and its goal placed)."""
-        return {
-            **observation,
-            "observation": self.encode(observation["observation"][None])[0],
+        poses = None
+        if self.pose_inputs:
+            if PROPRIO_KEY not in observation:
+                raise ValueError(
+                    f"this agent acts on the arm's pose (touch.pose_inputs), but the observation has no "
+                    f"{PROPRIO_KEY!r}: make its environment with proprio=True (the proprio track)"
+                )
+            poses = np.asarray(observation[PROPRIO_KEY], dtype=np.float32)[None]
+        features = {
+            **{name: value for name, value in observation.items() if name != PROPRIO_KEY},
+            "observation": self.encode(observation["observation"][None], poses)[0],
             "desired_goal": self.goals(np.asarray(observation["desired_goal"], dtype=np.float32)),
         }
+        return features
 
     def policy_action(self, observation: dict, *args, **kwargs):
         return self.agent.policy_action(self.features(observation), *args, **kwargs)
@@ -138,17 +160,19 @@ class TouchAgent:
         self.touch.load_state_dict(state["touch"])
 
 
-def touch_input_size(encoder: TouchEncoder, inputs: str) -> int:
-    """Length of the vectors a :class:`TouchAgent` with these ``inputs`` learns on."""
-    return encoder.features_size if inputs == "features" else encoder.readout_size
+def touch_input_size(encoder: TouchEncoder, inputs: str, pose_inputs: bool = False) -> int:
+    """Length of the vectors a :class:`TouchAgent` with these ``inputs`` (and pose inputs) learns on."""
+    size = encoder.features_size if inputs == "features" else encoder.readout_size
+    return size + 3 * bool(pose_inputs)
 
 
 def feature_space(
     observation_space: gym.spaces.Dict, features: int, goal_positions: bool = False
 ) -> gym.spaces.Dict:
     """The observation space with the image replaced by ``features`` float32 features (and, with
-    ``goal_positions``, the goal one-hot followed by the goal key's standardised x and y)."""
-    spaces = dict(observation_space.spaces)
+    ``goal_positions``, the goal one-hot followed by the goal key's standardised x and y); the arm's
+    pose, if the observation has it, goes into the features (:meth:`TouchAgent.encode`)."""
+    spaces = {name: space for name, space in observation_space.spaces.items() if name != PROPRIO_KEY}
     spaces["observation"] = gym.spaces.Box(-np.inf, np.inf, (features,), dtype=np.float32)
     if goal_positions:
         keys = observation_space["desired_goal"].shape[0]

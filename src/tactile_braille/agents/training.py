@@ -218,6 +218,8 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
             kwargs["dataset"] = config.dataset
         if rig is not None:
             kwargs["rig"] = rig
+        if config.touch.pose_inputs:
+            kwargs["proprio"] = True  # the proprio track's observation: with the arm's pose
     if config.max_episode_steps is not None:
         kwargs["max_episode_steps"] = config.max_episode_steps
     return gym.make(config.task, **kwargs)
@@ -238,10 +240,16 @@ def make_agent(config: TrainConfig, env: gym.Env):
     if config.touch.goal_positions:
         layout = env.unwrapped.layout
         positions = np.array([layout.centre_mm(key) for key in env.unwrapped.goal_keys])
-    size = touch_input_size(encoder, config.touch.inputs)
+    size = touch_input_size(encoder, config.touch.inputs, config.touch.pose_inputs)
     space = feature_space(env.observation_space, size, goal_positions=positions is not None)
     agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
-    return TouchAgent(agent, encoder, key_positions_mm=positions, inputs=config.touch.inputs)
+    return TouchAgent(
+        agent,
+        encoder,
+        key_positions_mm=positions,
+        inputs=config.touch.inputs,
+        pose_inputs=config.touch.pose_inputs,
+    )
 
 
 def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:

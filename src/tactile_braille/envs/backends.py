@@ -127,15 +127,28 @@ class DatasetBackend:
         self._grid_rows = order
         self._grid_pressed = _codes_from_dataset(dataset, self.layout, dataset.pressed)
 
+    def nearest_samples(self, x_mm: np.ndarray, y_mm: np.ndarray, depth_mm: np.ndarray) -> np.ndarray:
+        """Rows of the stored grid samples nearest to keyboard-frame poses (clamped to the grid)."""
+        pose = np.stack(np.broadcast_arrays(x_mm, y_mm, depth_mm), axis=-1)
+        cell = np.rint((pose - self._grid_start) / self._grid_step).astype(np.int64)
+        cell = np.minimum(np.maximum(cell, 0), self._grid_shape - 1)
+        flat = (cell[..., 0] * self._grid_shape[1] + cell[..., 1]) * self._grid_shape[2] + cell[..., 2]
+        return self._grid_rows[flat]
+
+    def pressed_codes(self, x_mm: np.ndarray, y_mm: np.ndarray, depth_mm: np.ndarray) -> np.ndarray:
+        """Codes of the keys taps at these poses press (-1: none), without reading their images."""
+        return self._grid_pressed[self.nearest_samples(x_mm, y_mm, depth_mm)]
+
+    @property
+    def grid_depths_mm(self) -> np.ndarray:
+        """The depths the grid samples (a continuous tap presses what the nearest of them pressed)."""
+        return self._grid_start[2] + self._grid_step[2] * np.arange(self._grid_shape[2])
+
     def continuous_taps(
         self, x_mm: np.ndarray, y_mm: np.ndarray, depth_mm: np.ndarray, rng: np.random.Generator
     ) -> tuple[np.ndarray, np.ndarray]:
         """The stored samples nearest to the poses; returns (images, pressed codes)."""
-        pose = np.stack([x_mm, y_mm, depth_mm], axis=-1)
-        cell = np.rint((pose - self._grid_start) / self._grid_step).astype(np.int64)
-        cell = np.minimum(np.maximum(cell, 0), self._grid_shape - 1)
-        flat = (cell[:, 0] * self._grid_shape[1] + cell[:, 1]) * self._grid_shape[2] + cell[:, 2]
-        rows = self._grid_rows[flat]
+        rows = self.nearest_samples(x_mm, y_mm, depth_mm)
         return self.observations[rows], self._grid_pressed[rows]
 
 

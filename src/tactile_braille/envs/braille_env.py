@@ -55,6 +55,7 @@ class BrailleEnv(gym.Env):
         rig: Rig | None = None,
         sensor: str = "braille_331",
         render_mode: str | None = None,
+        proprio: bool = False,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -62,7 +63,9 @@ class BrailleEnv(gym.Env):
             )
         self.task = Task(keys=keys, continuous=self.continuous)
         self._dome_radius_mm = sensor_preset(sensor).dome_diameter_mm / 2
-        self._core = BatchedBraille(self.task, make_backend(self.task, backend, dataset, rig, sensor), 1)
+        self._core = BatchedBraille(
+            self.task, make_backend(self.task, backend, dataset, rig, sensor), 1, proprio=proprio
+        )
         self.observation_space = self._core.observation_space()
         self.action_space = self._core.action_space()
         self.render_mode = render_mode
@@ -134,13 +137,7 @@ class BrailleEnv(gym.Env):
         return compute_reward(achieved_goal, desired_goal, info)
 
     def _observation(self) -> dict[str, np.ndarray]:
-        core = self._core
-        return {
-            "observation": core.images[0, :, :, None].copy(),
-            "previous_action": core.previous_action[0].copy(),
-            "achieved_goal": core.one_hot(core.achieved[0]).copy(),
-            "desired_goal": core.one_hot(core.goal[0]).copy(),
-        }
+        return {name: values[0] for name, values in self._core.observations().items()}
 
     def _info(self, pose: np.ndarray) -> dict[str, Any]:
         core = self._core

@@ -53,6 +53,9 @@ class ContinuousBrailleEnv(BrailleEnv):
       pose, no grid quantisation) or ``"rig"`` (``rig=...``).
     * ``dataset``: a grid dataset or its path (default: cached ``grid-<keys>``).
     * ``sensor``, ``render_mode``: as for the discrete environments.
+    * ``proprio``: the observation also holds ``sensor_pose`` (float32 keyboard-frame
+      x, y and tap depth in mm, what the arm reports): the ``proprio`` track's
+      observation (docs/benchmark.md). Default False: the paper's.
 
     ``info`` holds ``is_success``, ``pressed_key``, ``sensor_pose_mm`` and ``goal_key``.
 

@@ -21,6 +21,9 @@ from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout
 
 OBSERVATION_SIZE_PX = 100
 """Side of the tactile observation (the paper's 100 x 100)."""
+PROPRIO_KEY = "sensor_pose"
+"""The observation entry the ``proprio`` track adds (``proprio=True``): the sensor's keyboard-frame
+x, y and tap depth in mm, as the arm reports it (docs/benchmark.md)."""
 
 # Moves of the discrete actions in (row, column) of the key grid; PRESS stays.
 _MOVES = np.array([(-1, 0), (1, 0), (0, -1), (0, 1), (0, 0)], dtype=np.int64)
@@ -62,10 +65,14 @@ class BatchedBraille:
         task: what to type and how to move.
         backend: a :class:`DatasetBackend` or :class:`RigBackend`.
         n: number of environments.
+        proprio: observations also carry ``sensor_pose`` (the ``proprio`` track's, :data:`PROPRIO_KEY`).
     """
 
-    def __init__(self, task: Task, backend, n: int) -> None:
+    def __init__(self, task: Task, backend, n: int, proprio: bool = False) -> None:
+        if not isinstance(proprio, bool | np.bool_):
+            raise TypeError(f"proprio must be True or False, got {proprio!r}")
         self.task = task
+        self.proprio = bool(proprio)
         self.backend = backend
         self.n = n
         layout = backend.layout
@@ -107,14 +114,25 @@ class BatchedBraille:
             previous = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
         else:
             previous = spaces.Box(0.0, 1.0, (len(DISCRETE_ACTIONS),), dtype=np.float32)
-        return spaces.Dict(
-            {
-                "observation": spaces.Box(0, 255, (size, size, 1), dtype=np.uint8),
-                "previous_action": previous,
-                "achieved_goal": spaces.Box(0.0, 1.0, (goals,), dtype=np.float32),
-                "desired_goal": spaces.Box(0.0, 1.0, (goals,), dtype=np.float32),
-            }
-        )
+        observation = {
+            "observation": spaces.Box(0, 255, (size, size, 1), dtype=np.uint8),
+            "previous_action": previous,
+            "achieved_goal": spaces.Box(0.0, 1.0, (goals,), dtype=np.float32),
+            "desired_goal": spaces.Box(0.0, 1.0, (goals,), dtype=np.float32),
+        }
+        if self.proprio:
+            if self.task.continuous:
+                low_xy, high_xy = (
+                    self._workspace_low + self._frame_origin,
+                    self._workspace_high + self._frame_origin,
+                )
+            else:
+                cells = self.cell_positions_mm.reshape(-1, 2)
+                low_xy, high_xy = cells.min(axis=0), cells.max(axis=0)
+            low = np.array([*low_xy, 0.0], dtype=np.float32)
+            high = np.array([*high_xy, PRESS_DEPTH_MM], dtype=np.float32)
+            observation[PROPRIO_KEY] = spaces.Box(low, high, (3,), dtype=np.float32)
+        return spaces.Dict(observation)
 
     def action_space(self) -> spaces.Space:
         """Space of one environment's action."""
@@ -243,12 +261,15 @@ class BatchedBraille:
 
     def observations(self) -> dict[str, np.ndarray]:
         """Batched observation arrays (fresh copies)."""
-        return {
+        observations = {
             "observation": self.images[..., None].copy(),
             "previous_action": self.previous_action.copy(),
             "achieved_goal": self.one_hot(self.achieved),
             "desired_goal": self.one_hot(self.goal),
         }
+        if self.proprio:
+            observations[PROPRIO_KEY] = self.sensor_pose_mm().astype(np.float32)
+        return observations
 
     def pressed_key(self, i: int) -> str | None:
         code = int(self.pressed_code[i])

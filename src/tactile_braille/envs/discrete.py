@@ -56,6 +56,9 @@ class DiscreteBrailleEnv(BrailleEnv):
       ``keys-train``, generated on first use).
     * ``sensor``: sensor preset of the default dataset or renderer.
     * ``render_mode``: ``"rgb_array"`` or ``"human"``.
+    * ``proprio``: the observation also holds ``sensor_pose`` (float32 keyboard-frame
+      x, y and tap depth in mm, what the arm reports): the ``proprio`` track's
+      observation (docs/benchmark.md). Default False: the paper's.
 
     ``info`` holds ``is_success``, ``pressed_key``, ``sensor_pose_mm``
     (keyboard frame x, y, depth) and ``goal_key``. ``reset(options={"goal_key":

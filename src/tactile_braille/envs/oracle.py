@@ -1,9 +1,11 @@
-"""A scripted oracle that types with knowledge of the true sensor pose.
+"""Scripted oracles that type with knowledge of the true sensor pose.
 
-It proves every task solvable in simulation and gives the best return a
-policy can hope for; it is not a baseline (it does not read the tactile
-images). Discrete: the shortest path over the key grid to a goal cell, then
-PRESS. Continuous: a straight move to the goal key's centre, then a deep tap.
+They prove every task solvable in simulation and give the best return a
+policy can hope for; they are not baselines (they do not read the tactile
+images). :func:`oracle_action`: discrete, the shortest path over the key grid
+to a goal cell, then PRESS; continuous, a straight move to the goal key's
+centre, then a deep tap. :class:`PoseScript`, the typing yardstick: the same,
+but a continuous move that lands on the centre presses on that step.
 """
 
 from __future__ import annotations
@@ -46,3 +48,29 @@ def oracle_action(env) -> np.ndarray | int:
                 return first_move[nxt]
             queue.append(nxt)
     raise RuntimeError(f"goal key {goal_key!r} is not on the grid")
+
+
+class PoseScript:
+    """A pose-aware typing script, acting through the agents' interface (``policy_action``).
+
+    Discrete tasks: :func:`oracle_action`. Continuous tasks: a straight move
+    towards the goal key's centre, pressing (the deepest tap) on the step that
+    lands on it and tapping lightly on the way. Its steps are an upper
+    yardstick beside :func:`~tactile_braille.evaluation.bounds.typing_bound`'s
+    lower one: it presses at key centres, where the bound may press anywhere a
+    tap presses the key.
+    """
+
+    def __init__(self, env) -> None:
+        self.env = env
+
+    def policy_action(self, observation, step, explore, rng, deterministic=False):
+        braille = self.env.unwrapped
+        if not braille.task.continuous:
+            return oracle_action(self.env)
+        core = braille._core
+        goal = braille.goal_keys[int(core.goal[0])]
+        offset = np.array(core.layout.centre_mm(goal)) - braille.task.frame_origin_mm - core.position_mm[0]
+        move = offset / braille.task.max_move_mm
+        reaches = np.abs(move).max() <= 1.0
+        return np.array([*np.clip(move, -1, 1), 1.0 if reaches else -1.0], dtype=np.float32)

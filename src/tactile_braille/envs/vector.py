@@ -36,6 +36,7 @@ class VectorBrailleEnv(VectorEnv):
         dataset: the dataset or its path (default: the cached one).
         sensor: sensor preset of the default dataset.
         max_episode_steps: truncation (25, the registry's).
+        proprio: observations also carry ``sensor_pose`` (the ``proprio`` track's).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -49,6 +50,7 @@ class VectorBrailleEnv(VectorEnv):
         sensor: str = "braille_331",
         max_episode_steps: int = MAX_EPISODE_STEPS,
         backend: str = "dataset",
+        proprio: bool = False,
     ) -> None:
         if backend != "dataset":
             raise ValueError("the vectorised environment runs on the dataset backend only")
@@ -56,7 +58,9 @@ class VectorBrailleEnv(VectorEnv):
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         self.num_envs = int(num_envs)
         self.task = Task(keys=keys, continuous=self.continuous)
-        self._core = BatchedBraille(self.task, DatasetBackend(self.task, dataset, sensor=sensor), num_envs)
+        self._core = BatchedBraille(
+            self.task, DatasetBackend(self.task, dataset, sensor=sensor), num_envs, proprio=proprio
+        )
         self.single_observation_space = self._core.observation_space()
         self.single_action_space = self._core.action_space()
         self.observation_space = batch_space(self.single_observation_space, num_envs)

@@ -240,10 +240,10 @@ def results_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
 
 def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     lines = [
-        "| env | task | algo | track | seeds | steps | accuracy | steps, reset per key "
-        "| accuracy, reset per key | convergence epoch | first epoch >= 0.95 "
+        "| env | task | algo | track | seeds | steps | optimal steps | accuracy | steps, reset per key "
+        "| optimal steps, reset per key | accuracy, reset per key | convergence epoch | first epoch >= 0.95 "
         "| paper: steps | paper: accuracy | paper: convergence |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (task, algo, variant), records in groups.items():
         typed = [r.typing for r in records if r.typing]
@@ -251,6 +251,10 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
         accuracy = _stat([t["accuracy"] for t in typed], 3)
         reset = [t["released_protocol"] for t in typed if "released_protocol" in t]
         reset_steps = _stat([t["total_steps"] for t in reset], 0)
+        bound = _bound_cell([_bound(r, "paper") for r in records if r.typing])
+        reset_bound = _bound_cell(
+            [_bound(r, "released") for r in records if r.typing and "released_protocol" in r.typing]
+        )
         reset_accuracy = _stat([t["accuracy"] for t in reset], 3)
         convergence = _stat([r.convergence for r in records], 1)
         reached = [r.reached_095 for r in records]
@@ -262,10 +266,39 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
         paper_cells = [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
         lines.append(
             f"| sim | {TASK_NAMES.get(task, task)} | {_label(algo, variant)} | {records[0].track} "
-            f"| {len(records)} | {steps} | {accuracy} | {reset_steps} | {reset_accuracy} | {convergence} "
+            f"| {len(records)} | {steps} | {bound} | {accuracy} | {reset_steps} | {reset_bound} "
+            f"| {reset_accuracy} | {convergence} "
             f"| {reached_text} | " + " | ".join(paper_cells) + " |"
         )
     return "\n".join(lines)
+
+
+def _bound(record: RunRecord, protocol: str) -> float | None:
+    """The typing bound of a record's evaluation (:mod:`~tactile_braille.evaluation.bounds`): as its
+    typing.json recorded it, or computed for records evaluated before bounds existed (in the default
+    dataset's world when it is the record's; None otherwise)."""
+    from tactile_braille._registration import ENV_IDS
+    from tactile_braille.evaluation.bounds import typing_bound
+
+    typed = record.typing if protocol == "paper" else record.typing["released_protocol"]
+    if typed.get("typing_bound") is not None:
+        return typed["typing_bound"]
+    task_id = f"tactile_braille/{record.task}"
+    task = task_of(task_id) if task_id in ENV_IDS else None
+    if task is None or (record.config is not None and record.config.backend != "dataset"):
+        return None
+    if task.continuous and record.world != GENERATOR_VERSION:
+        return None
+    return typing_bound(task_id, protocol=protocol, seed=record.typing.get("typing_seed", 0))
+
+
+def _bound_cell(values: list[float | None]) -> str:
+    """One bound, or the range of the runs' (their evaluations' start poses may differ)."""
+    values = [v for v in values if v is not None]
+    if not values:
+        return "-"
+    low, high = min(values), max(values)
+    return f"{low:.0f}" if round(low) == round(high) else f"{low:.0f}-{high:.0f}"
 
 
 # ------------------------------------------------------------------ figures

@@ -78,7 +78,7 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
 def _summary(report: TypingReport) -> dict:
     return {"sequences": report.sequences, "keys_asked": report.keys_asked, "accuracy": report.accuracy,
             "total_steps": report.total_steps, "steps_per_key": report.steps_per_key,
-            "touch_optimum": report.touch_optimum}  # fmt: skip
+            "touch_optimum": report.touch_optimum, "typing_bound": report.typing_bound}  # fmt: skip
 
 
 def run_result(run_dir) -> dict:

@@ -236,6 +236,10 @@ class TypingReport:
     confusion: dict = field(repr=False)
     touch_optimum: float | None = None
     """The discrete tasks' expected touch-only optimum (:func:`touch_optimum`); None for continuous."""
+    typing_bound: float | None = None
+    """The fewest steps any policy, even one that knows its pose, can type the sequences in
+    (:func:`~tactile_braille.evaluation.bounds.typing_bound`: for these start poses under the paper's
+    protocol, the expectation with a reset per key); None off the dataset backend."""
     sentences: list[dict] | None = field(default=None, repr=False)
 
     @property
@@ -272,7 +276,8 @@ def evaluate_policy(
     ``policy``: a callable from the observation dictionary to an action, or
     one of our agents. ``task``: ``"DiscreteArrows-v0"`` or its full id.
     ``track``: the track the policy competes in (what it learnt from;
-    docs/benchmark.md). ``env``: an environment of the task to type in,
+    docs/benchmark.md); a ``proprio`` policy's observations also carry the
+    arm's pose (``sensor_pose``), a ``tactile`` one's do not. ``env``: an environment of the task to type in,
     instead of one made from ``backend``, ``dataset`` and
     ``max_episode_steps``. Alphabet tasks also type :data:`SENTENCES` unless
     ``sentences`` is false.
@@ -284,7 +289,8 @@ def evaluate_policy(
     if track not in TRACKS:
         raise ValueError(f"track must be one of {TRACKS}, got {track!r}")
     if env is None:
-        options = {"backend": backend, **({"dataset": dataset} if dataset is not None else {})}
+        options = {"backend": backend, "proprio": track == "proprio"}
+        options.update({"dataset": dataset} if dataset is not None else {})
         env = gym.make(
             task_id, **options, **({"max_episode_steps": max_episode_steps} if max_episode_steps else {})
         )
@@ -302,10 +308,23 @@ def evaluate_policy(
         confusion={"rows": list(result.keys), "columns": list(result.columns),
                    "counts": result.confusion().tolist()},
         touch_optimum=None if task_of(task_id).continuous else touch_optimum(keys, sequences, protocol),
+        typing_bound=_bound(env, sequences, protocol, seed),
     )  # fmt: skip
     if keys == "alphabet" and sentences:
         report.sentences = type_sentences(agent, env, seed + 1_000)
     return report
+
+
+def _bound(env: gym.Env, sequences, protocol: str, seed: int) -> float | None:
+    """:func:`~tactile_braille.evaluation.bounds.typing_bound` in ``env``'s world (None off the dataset
+    backend: the bound is of the paper's simulation)."""
+    from tactile_braille.envs.backends import DatasetBackend
+    from tactile_braille.evaluation.bounds import typing_bound
+
+    backend = env.unwrapped._core.backend
+    if not isinstance(backend, DatasetBackend):
+        return None
+    return typing_bound(env.spec.id, sequences, protocol, seed, dataset=backend.dataset)
 
 
 def _task_keys(task_id: str) -> str:

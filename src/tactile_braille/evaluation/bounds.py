@@ -1,0 +1,209 @@
+"""The fewest typing steps the simulated world allows: a lower bound that holds even for a policy
+that knows the sensor's pose and the key layout exactly.
+
+:func:`typing_bound` computes it from the world itself (the dataset backend, the paper's
+simulation), for the sequences and start poses of a typing evaluation
+(:func:`~tactile_braille.evaluation.protocol.type_sequences`):
+
+* **Discrete tasks.** A move goes to a neighbouring cell of the key grid (a
+  move off the grid stays), so the fewest moves between two cells is their
+  Manhattan distance; a key is typed by one more step, PRESS, on one of its
+  cells. With no reset between keys (the paper's protocol) the cell each key
+  is pressed at decides where the next key starts (SPACE has six): dynamic
+  programming over the sequence picks the best, from the start cell the
+  evaluation's seed draws. Exact.
+* **Continuous tasks.** A step moves the sensor by up to the task's largest
+  move in x and in y (a box; the position stays in the workspace) and taps
+  at any depth in [2, 8] mm; the tap presses what the stored grid sample
+  nearest to it pressed. The workspace is rasterised at :data:`RASTER_MM`;
+  a key's *press region* is every raster cell a tap at some depth presses it
+  in. The places the sensor can have pressed each key after a given number of
+  steps are tracked as raster masks (the last masks dilated by the moves,
+  intersected with the key's press region), again from the evaluation's start
+  pose. A raster cell counts as reached as soon as any point of it is, so the
+  count is never above the true fewest: a lower bound, tight to the raster.
+
+With a reset per key (``protocol="released"``) each key starts from a fresh
+uniformly random pose drawn from a generator the policy's own steps advance,
+so no start is known in advance: the bound is then the *expected* fewest
+steps over uniform starts (exact for discrete tasks, a lower bound on it for
+continuous ones), and a policy can come below it by luck of its starts.
+
+The same script with the pose gives an upper yardstick
+(``benchmarks/typing_bounds.py`` prints both, and the touch-only optimum).
+
+>>> round(typing_bound("DiscreteArrows-v0", [("UP", "DOWN")], protocol="released"), 3)
+4.333
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import gymnasium as gym
+import numpy as np
+
+from tactile_braille.envs.backends import DatasetBackend
+from tactile_braille.envs.registry import task_of
+from tactile_braille.evaluation.protocol import PROTOCOLS, paper_sequences
+
+RASTER_MM = 0.5
+"""Side of the raster cells of the continuous workspace (a divisor of the grids' half-spacings and of
+the workspaces' sides, so the raster cells' edges fall on the press regions' edges)."""
+
+
+def typing_bound(
+    task: str,
+    sequences: Sequence[Sequence[str]] | None = None,
+    protocol: str = "paper",
+    seed: int = 0,
+    dataset=None,
+) -> float:
+    """The fewest steps any policy can type ``sequences`` in on ``task``'s dataset backend (module docs).
+
+    ``sequences`` default to the paper's evaluation sequences; ``seed`` is the
+    typing evaluation's seed (sequence ``i`` starts from the pose that
+    ``reset(seed=seed + i)`` draws). ``protocol="paper"``: exact for those
+    starts (continuous tasks: to :data:`RASTER_MM`); ``"released"``: the
+    expectation over uniformly random starts.
+    """
+    task_id = task if "/" in task else f"tactile_braille/{task}"
+    spec = task_of(task_id)
+    if spec is None:
+        raise ValueError(f"typing_bound is for the braille tasks, got {task!r}")
+    sequences = paper_sequences(spec.keys) if sequences is None else [tuple(s) for s in sequences]
+    where = None if dataset is None else str(getattr(dataset, "path", dataset))
+    key = (task_id, tuple(sequences), protocol, seed, where)
+    if key not in _BOUNDS:
+        _BOUNDS[key] = _typing_bound(task_id, spec, sequences, protocol, seed, dataset)
+    return _BOUNDS[key]
+
+
+_BOUNDS: dict[tuple, float] = {}
+"""Bounds computed in this process, by task, sequences, protocol, seed and dataset path."""
+
+
+def _typing_bound(task_id: str, spec, sequences: list[tuple[str, ...]], protocol: str, seed: int, dataset):
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
+    unknown = sorted({key for s in sequences for key in s} - set(spec.goal_keys))
+    if unknown:
+        raise ValueError(f"keys {unknown} are not among {task_id}'s keys {spec.goal_keys}")
+    env = gym.make(task_id, **({"dataset": dataset} if dataset is not None else {}))
+    braille = env.unwrapped
+    world = _ContinuousWorld(braille) if spec.continuous else _GridWorld(braille)
+    if protocol == "released":
+        return float(sum(world.expected_from_anywhere(goal) for sequence in sequences for goal in sequence))
+    total = 0
+    for number, sequence in enumerate(sequences):
+        if not sequence:
+            continue
+        env.reset(seed=seed + number, options={"goal_key": sequence[0]})  # the evaluation's start
+        total += world.fewest_steps(sequence)
+    return float(total)
+
+
+class _GridWorld:
+    """Discrete tasks: cells of the key grid, Manhattan moves, one PRESS per key."""
+
+    def __init__(self, braille) -> None:
+        self.core = braille._core
+        grid = braille.task.key_grid
+        self.cells = np.argwhere(np.ones(grid.shape, dtype=bool))
+        self.cells_of = {key: np.argwhere(grid == key) for key in braille.goal_keys}
+
+    def fewest_steps(self, sequence: Sequence[str]) -> int:
+        """From the sensor's cell now: the fewest steps over the sequence (best press cell per key)."""
+        at, cost = self.core.cell[:1].copy(), np.zeros(1, dtype=np.int64)
+        for goal in sequence:
+            targets = self.cells_of[goal]
+            moves = np.abs(at[:, None, :] - targets[None, :, :]).sum(axis=-1)  # (from, to)
+            at, cost = targets, (cost[:, None] + moves + 1).min(axis=0)
+        return int(cost.min())
+
+    def expected_from_anywhere(self, goal: str) -> float:
+        targets = self.cells_of[goal]
+        moves = np.abs(self.cells[:, None, :] - targets[None, :, :]).sum(axis=-1).min(axis=1)
+        return float(np.mean(moves + 1))
+
+
+class _ContinuousWorld:
+    """Continuous tasks on the dataset backend: raster masks of where the sensor can be."""
+
+    def __init__(self, braille) -> None:
+        backend = braille._core.backend
+        if not isinstance(backend, DatasetBackend):
+            raise ValueError("typing bounds are computed on the dataset backend (the paper's simulation)")
+        self.core, task = braille._core, braille.task
+        (x0, x1), (y0, y1) = task.workspace_mm
+        self.low = np.array([x0, y0])
+        shape = (round((x1 - x0) / RASTER_MM), round((y1 - y0) / RASTER_MM))
+        if not np.allclose(np.array(shape) * RASTER_MM, [x1 - x0, y1 - y0]):
+            raise ValueError(
+                f"the workspace {task.workspace_mm} is not a whole number of {RASTER_MM} mm cells"
+            )
+        self.move_cells = round(task.max_move_mm / RASTER_MM)
+        self.max_moves = math.ceil(max(shape) / self.move_cells)  # enough to cross the workspace
+        origin = np.array(task.frame_origin_mm)
+        centres = [self.low[i] + origin[i] + (np.arange(shape[i]) + 0.5) * RASTER_MM for i in range(2)]
+        x, y = np.meshgrid(*centres, indexing="ij")
+        pressed = np.stack([backend.pressed_codes(x, y, depth) for depth in backend.grid_depths_mm])
+        layout = braille.layout
+        self.regions = {key: (pressed == layout.key(key).index).any(axis=0) for key in braille.goal_keys}
+        empty = [key for key, region in self.regions.items() if not region.any()]
+        if empty:
+            raise ValueError(f"no tap in the workspace presses {empty}: the dataset cannot type them")
+
+    def _reach(self, mask: np.ndarray, moves: int) -> np.ndarray:
+        """Raster cells any point of which is within ``moves`` steps of a point of ``mask``'s cells."""
+        return _dilate(mask, moves * self.move_cells + 1)
+
+    def fewest_steps(self, sequence: Sequence[str]) -> int:
+        """From the sensor's position now: the fewest steps over the sequence (a lower bound)."""
+        start = np.zeros(next(iter(self.regions.values())).shape, dtype=bool)
+        cell = np.floor((self.core.position_mm[0] - self.low) / RASTER_MM).astype(int)
+        start[tuple(np.clip(cell, 0, np.array(start.shape) - 1))] = True
+        frontier = [(0, start)]  # (steps so far, raster cells the sensor can be in)
+        for goal in sequence:
+            reached: dict[int, np.ndarray] = {}
+            for steps, mask in frontier:
+                for moves in range(1, self.max_moves + 1):
+                    here = self._reach(mask, moves) & self.regions[goal]
+                    if here.any():
+                        reached[steps + moves] = reached.get(steps + moves, False) | here
+            frontier = self._undominated(sorted(reached.items()))
+        return frontier[0][0]
+
+    def _undominated(self, entries: list[tuple[int, np.ndarray]]) -> list[tuple[int, np.ndarray]]:
+        """Drop an entry whose cells all lie within its extra steps' moves of a cheaper entry's: any
+        way on from it is as short from there (moves of exactly ``extra * move_cells`` raster cells,
+        so that chaining them with a later reach stays inside the direct reach)."""
+        kept: list[tuple[int, np.ndarray]] = []
+        for steps, mask in entries:
+            if not any(not (mask & ~_dilate(k_mask, (steps - k_steps) * self.move_cells)).any()
+                       for k_steps, k_mask in kept):  # fmt: skip
+                kept.append((steps, mask))
+        return kept
+
+    def expected_from_anywhere(self, goal: str) -> float:
+        """Mean fewest steps to press ``goal`` from a uniformly random raster cell."""
+        steps = np.zeros(self.regions[goal].shape)
+        for moves in range(self.max_moves, 0, -1):
+            steps[self._reach(self.regions[goal], moves)] = moves
+        return float(steps.mean())
+
+
+def _dilate(mask: np.ndarray, cells: int) -> np.ndarray:
+    """``mask`` grown by ``cells`` raster cells along both axes (a square of side 2 * cells + 1)."""
+    out = mask
+    for axis in (0, 1):
+        padded = np.moveaxis(out, axis, 0)
+        padded = np.concatenate([np.zeros((cells, *padded.shape[1:]), dtype=bool), padded])
+        span, length = 1, 2 * cells + 1  # padded[i] becomes the OR of padded[i : i + span]
+        while span < length:
+            shift = min(span, length - span)
+            padded[:-shift] |= padded[shift:]
+            span += shift
+        out = np.moveaxis(padded[: out.shape[axis]], 0, axis)
+    return out
