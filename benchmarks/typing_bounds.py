@@ -45,7 +45,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=1, help="typing seeds (start poses) per protocol")
     args = parser.parse_args()
     print("| task | bound, no reset | pose script, no reset | touch-only, no reset (>=) "
-          "| bound, reset per key (expected) | pose script, reset per key | paper's Table III steps |")  # fmt: skip
+          "| bound, reset per key (expected) | pose script, reset per key "
+          "| paper's Table III steps |")  # fmt: skip
     print("|---|---|---|---|---|---|---|")
     for task in TASKS:
         env = gym.make(f"tactile_braille/{task}")

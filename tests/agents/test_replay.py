@@ -26,7 +26,6 @@ import feature_agents
 import replay_helpers
 from replay_helpers import FEATURES, GOALS, Frames, as_images, replay_observation
 from tactile_braille.agents import replay as after
-from tactile_braille.agents.replay import FRAME_LABELS
 from tactile_braille.agents.replay import (
     FRAME_LABELS,
     PACKED_BYTES,
@@ -1005,7 +1004,9 @@ def test_a_buffer_of_small_images_samples_saves_and_encodes_them(tmp_path):
     assert buffer.labelled_frames()[0].shape == (2, 1, 12, 8)
     buffer.save(tmp_path / "small.npz")
     restored = EpisodeReplayBuffer(10, GOALS, (), PREVIOUS, observation_shape=(12, 8, 1), relabel="all")
-    restored.set_encoder(lambda images, labels=None: images.reshape(len(images), -1)[:, :3].astype(np.float32), 3)
+    restored.set_encoder(
+        lambda images, labels=None: images.reshape(len(images), -1)[:, :3].astype(np.float32), 3
+    )
     restored.load(tmp_path / "small.npz")
     features = restored.sample(4, np.random.default_rng(1))["images"]
     np.testing.assert_array_equal(features, batch["images"].reshape(4, -1)[:, :3])

@@ -130,3 +130,29 @@ def test_a_touch_agent_on_the_readout_encodes_with_the_heads():
     np.testing.assert_array_equal(agent.encode(images), encoder.read(images))
     with pytest.raises(ValueError, match="inputs must be one of"):
         TouchAgent(agent.agent, encoder, inputs="pixels")
+
+
+# ---------------------------------------------------------------- the arm's pose as an input
+def test_a_touch_agent_with_pose_inputs_appends_the_standardised_pose_of_each_frame():
+    encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8)
+    encoder.pose_mean.copy_(torch.tensor([10.0, -20.0, 5.0]))
+    encoder.pose_scale.copy_(torch.tensor([2.0, 4.0, 0.5]))
+    space = feature_space(feature_observation_space(), encoder.readout_size + 3)
+    inner = SACAgent(space, ACTION_SPACE, SACConfig(hidden=(8,)))
+    agent = TouchAgent(inner, encoder, inputs="readout", pose_inputs=True)
+    assert agent.input_size == encoder.readout_size + 3
+    images = np.random.default_rng(0).integers(0, 2, (2, 100, 100, 1), dtype=np.uint8) * 255
+    labels = np.array([[12.0, -24.0, 5.5, 1, 2], [10.0, -20.0, 5.0, -1, -1]], dtype=np.float32)
+    vectors = agent.encode(images, labels)
+    np.testing.assert_array_equal(vectors[:, :-3], encoder.read(images))
+    np.testing.assert_allclose(vectors[:, -3:], [[1.0, -1.0, 1.0], [0.0, 0.0, 0.0]], atol=1e-6)
+    with pytest.raises(ValueError, match="needs the arm's pose of every frame"):
+        agent.encode(images, np.full_like(labels, np.nan))  # frames stored without labels
+    observation = {
+        "observation": images[0], "previous_action": np.zeros(PREVIOUS, np.float32),
+        "achieved_goal": np.zeros(GOALS, np.float32), "desired_goal": np.eye(GOALS, dtype=np.float32)[1],
+        "sensor_pose": labels[0, :3],
+    }  # fmt: skip
+    features = agent.features(observation)
+    assert "sensor_pose" not in features  # it went into the vector
+    np.testing.assert_allclose(features["observation"], vectors[0], atol=1e-6)

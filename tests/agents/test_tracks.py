@@ -35,6 +35,10 @@ def test_every_preset_declares_its_track_and_keeps_to_it(preset, task, algo):
         ({"touch": {"enabled": True}}, "touch.enabled labels every frame with the arm's pose"),
         ({"touch": {"enabled": True, "goal_positions": True}}, "touch.goal_positions places the goal"),
         ({"touch": {"enabled": True}, "agent": {"critic_pose": True}}, "agent.critic_pose shows the critics"),
+        (
+            {"touch": {"enabled": True, "pose_inputs": True}},
+            "touch.pose_inputs shows the agent the arm's pose",
+        ),
     ],
 )
 def test_a_tactile_run_using_pose_or_layout_is_refused_with_what_it_used(changes, named):
@@ -114,3 +118,22 @@ def test_a_tactile_run_learns_identically_when_all_but_its_observations_and_rewa
         scrambled = _learnt(config, tmp_path / f"{config.track}-scrambled", monkeypatch, scrambled=True)
         assert (plain == scrambled) is same, config.track
     assert json.loads((tmp_path / "tactile-plain" / "config.json").read_text())["track"] == "tactile"
+
+
+def test_a_run_with_pose_inputs_acts_on_the_pose_its_observation_carries(env_datasets, tmp_path):
+    from tactile_braille.agents.report import load_run
+
+    touch = {"pose_inputs": True, "inputs": "readout", "goal_positions": True}
+    train(touch_config(env_datasets, "sac", epochs=2, touch=touch), run_dir=tmp_path / "run", progress=False)
+    config, env, agent = load_run(tmp_path / "run")
+    assert config.touch.pose_inputs and "sensor_pose" in env.observation_space.spaces  # made proprio
+    observation, _ = env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    here = agent.policy_action(observation, 0, explore=False, rng=rng, deterministic=True)
+    elsewhere = {**observation, "sensor_pose": observation["sensor_pose"] + np.float32([15, -15, 0])}
+    assert not np.allclose(
+        here, agent.policy_action(elsewhere, 0, explore=False, rng=rng, deterministic=True)
+    )
+    blind = {name: value for name, value in observation.items() if name != "sensor_pose"}
+    with pytest.raises(ValueError, match="make its environment with proprio=True"):
+        agent.policy_action(blind, 0, explore=False, rng=rng, deterministic=True)

@@ -673,3 +673,38 @@ def test_default_dataset_is_generated_into_the_cache(_cache_in_tmp):
             break
     assert terminated and reward == 1.0 and info["is_success"]
     env.close()
+
+
+# ----------------------------------------------------------------------------- the proprio observation
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_a_proprio_observation_adds_the_arms_pose_and_nothing_else(make, env_id):
+    plain, proprio = make(env_id), make(env_id, proprio=True)
+    assert "sensor_pose" not in plain.observation_space.spaces  # the paper's observation by default
+    assert set(proprio.observation_space) == {*plain.observation_space, "sensor_pose"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a bounded, well-formed space
+        check_env(proprio.unwrapped, skip_render_check=True)
+    actions = _actions(env_id, 40)
+    observation, info = proprio.reset(seed=5)
+    reference, _ = plain.reset(seed=5)
+    for action in actions:
+        assert proprio.observation_space.contains(observation)
+        np.testing.assert_allclose(observation["sensor_pose"], info["sensor_pose_mm"], rtol=1e-6)
+        assert_same({k: v for k, v in observation.items() if k != "sensor_pose"}, reference)
+        observation, _, terminated, truncated, info = proprio.step(action)
+        reference, _, *_ = plain.step(action)
+        if terminated or truncated:
+            observation, info = proprio.reset()
+            reference, _ = plain.reset()
+
+
+def test_the_vector_env_gives_the_proprio_observation_too(datasets):
+    env_id = DISCRETE_IDS[0]
+    vector = gym.make_vec(env_id, num_envs=3, dataset=datasets[env_id], proprio=True)
+    observations, _ = vector.reset(seed=2)
+    poses = vector.unwrapped._core.sensor_pose_mm()
+    np.testing.assert_allclose(observations["sensor_pose"], poses, rtol=1e-6)
+    assert len({tuple(p) for p in poses}) > 1  # each environment's own
+    assert vector.single_observation_space["sensor_pose"].shape == (3,)
+    with pytest.raises(TypeError, match="proprio must be True or False"):
+        gym.make(env_id, dataset=datasets[env_id], proprio="yes")

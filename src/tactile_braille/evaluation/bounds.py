@@ -1,5 +1,6 @@
-"""The fewest typing steps the simulated world allows: a lower bound that holds even for a policy
-that knows the sensor's pose and the key layout exactly.
+"""The fewest typing steps the simulated world allows: a lower bound on the steps of any policy that
+types every key right, even one that knows the sensor's pose and the key layout exactly (a policy
+that presses wrong keys can take fewer).
 
 :func:`typing_bound` computes it from the world itself (the dataset backend, the paper's
 simulation), for the sequences and start poses of a typing evaluation
@@ -143,9 +144,19 @@ class _ContinuousWorld:
             raise ValueError(
                 f"the workspace {task.workspace_mm} is not a whole number of {RASTER_MM} mm cells"
             )
+        origin = np.array(task.frame_origin_mm)
+        step = backend._grid_step[:2]
+        edges = (backend._grid_start[:2] - origin - step / 2 - self.low) / RASTER_MM  # first cell edges
+        if not (
+            np.allclose(edges, np.round(edges), atol=1e-6)
+            and np.allclose(step / RASTER_MM, np.round(step / RASTER_MM))
+        ):
+            raise ValueError(
+                f"the dataset's grid (spacing {step.tolist()} mm) does not put its cells' edges on the "
+                f"{RASTER_MM} mm raster of the workspace: its bound would not be exact"
+            )
         self.move_cells = round(task.max_move_mm / RASTER_MM)
         self.max_moves = math.ceil(max(shape) / self.move_cells)  # enough to cross the workspace
-        origin = np.array(task.frame_origin_mm)
         centres = [self.low[i] + origin[i] + (np.arange(shape[i]) + 0.5) * RASTER_MM for i in range(2)]
         x, y = np.meshgrid(*centres, indexing="ij")
         pressed = np.stack([backend.pressed_codes(x, y, depth) for depth in backend.grid_depths_mm])

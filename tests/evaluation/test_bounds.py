@@ -1,0 +1,135 @@
+"""The typing bounds (evaluation/bounds.py): never above what a pose-aware policy or a trained policy
+achieved in the same world, tight, and exact where it can be checked by hand."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from tactile_braille.envs.oracle import PoseScript
+from tactile_braille.evaluation.bounds import RASTER_MM, _ContinuousWorld, typing_bound
+from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
+from tactile_braille.evaluation.scoring import evaluate_policy
+
+ROOT = Path(__file__).resolve().parents[2]
+DISCRETE = ("tactile_braille/DiscreteArrows-v0", "tactile_braille/DiscreteAlphabet-v0")
+CONTINUOUS = ("tactile_braille/ContinuousArrows-v0", "tactile_braille/ContinuousAlphabet-v0")
+
+
+def test_the_discrete_bound_by_hand():
+    # From a uniformly random cell of [[NONE, UP, NONE], [LEFT, DOWN, RIGHT]]: UP is 0, 1 or 2 moves
+    # away (mean 7/6), then PRESS; DOWN the same.
+    assert typing_bound("DiscreteArrows-v0", [("UP", "DOWN")], protocol="released") == pytest.approx(26 / 6)
+    # With no reset, DOWN after UP is one move and a press away, whatever the start.
+    env = gym.make(DISCRETE[0])
+    env.reset(seed=0, options={"goal_key": "UP"})
+    start = env.unwrapped._core.cell[0]
+    to_up = abs(start[0] - 0) + abs(start[1] - 1)
+    assert typing_bound("DiscreteArrows-v0", [("UP", "DOWN")], seed=0) == to_up + 1 + 2
+
+
+@pytest.mark.parametrize("task", DISCRETE)
+def test_a_pose_aware_script_types_the_discrete_tasks_in_exactly_the_bound(env_datasets, task):
+    env = gym.make(task, dataset=env_datasets[task])
+    sequences = paper_sequences(env.unwrapped.task.keys)
+    for seed in (0, 3):
+        steps = type_sequences(PoseScript(env), env, sequences, seed=seed).total_steps
+        assert typing_bound(task, sequences, seed=seed, dataset=env_datasets[task]) == steps
+
+
+@pytest.mark.parametrize("task", CONTINUOUS)
+def test_the_continuous_bound_is_below_the_centre_seeking_script(env_datasets, task):
+    env = gym.make(task, dataset=env_datasets[task])
+    sequences = paper_sequences(env.unwrapped.task.keys)[:4]
+    steps = type_sequences(PoseScript(env), env, sequences, seed=1).total_steps
+    bound = typing_bound(task, sequences, seed=1, dataset=env_datasets[task])
+    assert sum(map(len, sequences)) <= bound <= steps
+
+
+class EdgePresser:
+    """Presses the goal at the nearest raster cell of its press region, at a depth that presses it there:
+    a policy that knows the press regions the bound is computed from."""
+
+    def __init__(self, env: gym.Env, world: _ContinuousWorld) -> None:
+        self.env, self.world = env, world
+        braille = env.unwrapped
+        self.backend, self.task = braille._core.backend, braille.task
+
+    def policy_action(self, observation, step, explore, rng, deterministic=False):
+        braille = self.env.unwrapped
+        core = braille._core
+        goal = braille.goal_keys[int(core.goal[0])]
+        cells = np.argwhere(self.world.regions[goal])
+        centres = self.world.low + (cells + 0.5) * RASTER_MM
+        here = core.position_mm[0]
+        target = centres[np.abs(centres - here).max(axis=1).argmin()]
+        move = (target - here) / self.task.max_move_mm
+        if np.abs(move).max() > 1.0:  # not within reach: go as far as a step goes, tapping lightly
+            return np.array([*np.clip(move, -1, 1), -1.0], dtype=np.float32)
+        x, y = target + self.task.frame_origin_mm
+        depths = self.backend.grid_depths_mm
+        code = braille.layout.key(goal).index
+        depth = depths[np.flatnonzero(self.backend.pressed_codes(x, y, depths) == code)[0]]
+        low, high = self.task.depth_range_mm
+        return np.array([*move, (depth - (low + high) / 2) / ((high - low) / 2)], dtype=np.float32)
+
+
+@pytest.mark.parametrize("task", CONTINUOUS)
+def test_the_continuous_bound_is_tight_a_policy_that_presses_at_the_region_edge_nearly_meets_it(
+    env_datasets, task
+):
+    env = gym.make(task, dataset=env_datasets[task])
+    world = _ContinuousWorld(env.unwrapped)
+    policy = EdgePresser(env, world)
+    keys = env.unwrapped.goal_keys
+    gaps = []
+    for seed in range(30):
+        sequence = (keys[seed % len(keys)],)
+        typed = type_sequences(policy, env, [sequence], seed=seed)
+        assert typed.typed == [[sequence[0]]]  # it presses the goal
+        bound = typing_bound(task, [sequence], seed=seed, dataset=env_datasets[task])
+        gaps.append(typed.total_steps - bound)
+    # Never below the bound; above it by at most the raster's rounding (one step), and mostly not at all.
+    assert min(gaps) >= 0 and max(gaps) <= 1 and np.mean(gaps) < 0.2, gaps
+
+
+def test_the_bound_is_never_above_the_committed_runs_steps():
+    files = sorted(ROOT.glob("results/**/typing.json"))
+    assert files, "the repository commits run records with typing evaluations"
+    for file in files:
+        typing = json.loads(file.read_text())
+        task = typing["task"]
+        bound = typing_bound(task, seed=typing.get("typing_seed", 0))
+        assert bound <= typing["total_steps"], file
+
+
+def test_an_evaluation_records_its_bound_and_a_proprio_policy_sees_the_pose(env_datasets):
+    task = CONTINUOUS[0]
+    seen = []
+
+    def policy(observation):
+        seen.append(set(observation))
+        return np.array([0.0, 0.0, 1.0], dtype=np.float32)  # press where it is
+
+    report = evaluate_policy(policy, task, dataset=env_datasets[task], track="proprio")
+    assert report.typing_bound == typing_bound(task, dataset=env_datasets[task])
+    assert "sensor_pose" in seen[0]
+    # Pressing whatever is under the sensor takes one step a key: fewer than the bound, which is for
+    # typing every key right, and wrong.
+    assert report.total_steps == report.keys_asked < report.typing_bound and report.accuracy < 0.5
+    seen.clear()
+    evaluate_policy(policy, task, dataset=env_datasets[task], track="tactile")
+    assert "sensor_pose" not in seen[0]
+
+
+def test_bad_requests_are_refused():
+    with pytest.raises(ValueError, match="not among"):
+        typing_bound("DiscreteArrows-v0", [("UP", "Q")])
+    with pytest.raises(ValueError, match="protocol must be"):
+        typing_bound("DiscreteArrows-v0", protocol="mine")
+    with pytest.raises(ValueError, match="unknown task"):
+        typing_bound("Pendulum-v9")
