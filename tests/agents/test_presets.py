@@ -9,6 +9,7 @@ from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK
 from tactile_braille.agents import preset_config
 from tactile_braille.agents.config import flatten
 from tactile_braille.agents.presets import preset_differences
+from tactile_braille.sweep import PAPER_SIM_RUNS
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -141,11 +142,11 @@ def test_fast_changes_the_papers_settings():
     assert preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", "sac").epochs == 90
 
 
-def test_the_fast_preset_gives_its_continuous_alphabet_additions_to_that_task_only():
-    for algo in ("sac", "td3"):
-        config = preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", algo)
-        assert config.agent.critic_pose and config.touch.goal_positions and config.touch.inputs == "readout"
-    for preset, task in (("fast", CONTINUOUS_TASK), ("paper", "tactile_braille/ContinuousAlphabet-v0")):
-        config = preset_config(preset, task, "sac")
-        assert not config.agent.critic_pose and not config.touch.goal_positions
-        assert config.touch.inputs == "features"
+def test_the_fast_preset_acts_on_the_pose_everywhere_and_gives_asymmetric_critics_to_one_task():
+    for task, algo in PAPER_SIM_RUNS:
+        config = preset_config("fast", f"tactile_braille/{task}", algo)
+        touch = config.touch
+        assert touch.pose_inputs and touch.goal_positions and touch.inputs == "readout", task
+        assert getattr(config.agent, "critic_pose", False) == (task == "ContinuousAlphabet-v0"), task
+        paper = preset_config("paper", f"tactile_braille/{task}", algo)
+        assert not (paper.touch.pose_inputs or paper.touch.goal_positions or paper.touch.enabled)

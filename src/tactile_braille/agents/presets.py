@@ -14,9 +14,9 @@ once in :mod:`~tactile_braille.agents.config`):
 * ``fast`` is ours (docs/agents.md, "Beyond the paper"): a touch encoder
   fitted and refitted on the run's own labelled taps, relabelling of every
   transition for every goal, and more, cheaper updates on the encoder's
-  features; on the continuous alphabet also asymmetric critics that see the
-  sensor pose, goals placed on the calibrated layout, and learning on the
-  encoder's readout (:func:`fast_changes`).
+  readout, with the arm's pose and the goal placed on the calibrated layout
+  as inputs; on the continuous alphabet also asymmetric critics that see the
+  sensor pose (:func:`fast_changes`).
 
 Each preset declares its track (:data:`PRESET_TRACKS`, docs/benchmark.md):
 ``paper`` and ``released`` are ``tactile``, ``fast`` (whose encoder learns from
@@ -106,15 +106,22 @@ def fast_changes(task: str, algo: str) -> dict[str, Any]:
         "start_steps": 200 if arrows else 500,
         "updates_per_step": 2 if algo == "td3" else 4,
         "replay": {"relabel": "all"},
-        "touch": {"enabled": True, "refit_every": 200 if arrows else 250, "refits": 4 if arrows else 16},
+        # The agent acts on what the encoder reads (pose, key probabilities), the arm's pose and the
+        # goal key's place on the calibrated layout, all in the encoder's pose coordinates: "where to go"
+        # is then one function for every key, and the pose the arm reports makes it exact (issue 20).
+        "touch": {
+            "enabled": True,
+            "refit_every": 200 if arrows else 250,
+            "refits": 4 if arrows else 16,
+            "inputs": "readout",
+            "goal_positions": True,
+            "pose_inputs": True,
+        },
         "agent": {"hidden": (256, 256), "batch_size": 128, "learning_rate": 1e-3, "adam_eps": 1e-8},
     }
     if (kind, keys) == ("continuous", "alphabet"):
         # Reading a letter at any offset takes many more taps than at key centres: refit all along.
-        # The agent learns on what the encoder reads (pose, key probabilities), which keeps its meaning
-        # across the 20 refits, where latent features changed theirs and cost test return at each refit;
-        # the goal is given where it lies on the calibrated layout, in the encoder's pose coordinates.
-        changes["touch"].update(refit_every=1000, refits=20, inputs="readout", goal_positions=True)
+        changes["touch"].update(refit_every=1000, refits=20)
         # The critics also see the sensor pose the arm reports: judging a move is easy from where the
         # sensor is, and the actor, which acts on touch alone, learns from that judgement.
         changes["agent"]["critic_pose"] = True
