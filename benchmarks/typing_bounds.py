@@ -15,12 +15,19 @@ keys; the released code: a reset per key), on the dataset backend:
   policy that knows only what it has felt (``touch_optimum``; a lower bound
   with no reset).
 
-Run: python benchmarks/typing_bounds.py [--seeds 1]
+With ``--runs RECORD ...`` (run folders or archived records with a
+``typing.json``) it adds their mean steps per task, and ``--figure PNG`` draws
+everything as bars, steps relative to the bound.
+
+Run: python benchmarks/typing_bounds.py [--seeds 1] [--runs results/fast/*]
+        [--figure docs/images/typing_bounds.png]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -43,7 +50,18 @@ def _cell(values: list[float]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=1, help="typing seeds (start poses) per protocol")
+    parser.add_argument("--runs", nargs="*", type=Path, default=[], help="run folders or records to add")
+    parser.add_argument("--figure", type=Path, default=None, help="write the bars to this PNG")
     args = parser.parse_args()
+    runs: dict[str, dict[str, list[int]]] = {}  # task -> protocol -> steps of the runs (right keys only)
+    for run in args.runs:
+        typing = json.loads((run / "typing.json").read_text())
+        for protocol, typed in (("paper", typing), ("released", typing.get("released_protocol"))):
+            if typed is not None:
+                runs.setdefault(typing["task"].split("/")[-1], {}).setdefault(protocol, []).append(
+                    typed["total_steps"]
+                )
+    bars: dict[str, dict[str, float]] = {}
     print("| task | bound, no reset | pose script, no reset | touch-only, no reset (>=) "
           "| bound, reset per key (expected) | pose script, reset per key "
           "| paper's Table III steps |")  # fmt: skip
@@ -59,12 +77,47 @@ def main() -> None:
             bounds = [typing_bound(task, sequences, protocol, seed) for seed in seeds]
             steps = [type_sequences(script, env, sequences, seed, protocol).total_steps for seed in seeds]
             cells += [_cell(bounds), _cell(steps)]
+            ran = runs.get(task, {}).get(protocol)
+            if ran:
+                cells[-1] += f"; runs {_cell(ran)}"
+            here = bars.setdefault(task, {})
+            here.update({f"bound {protocol}": np.mean(bounds), f"script {protocol}": np.mean(steps)})
+            if ran:
+                here[f"runs {protocol}"] = np.mean(ran)
             if protocol == "paper":
                 continuous = env.unwrapped.task.continuous
                 cells.append("-" if continuous else f"{touch_optimum(keys, sequences, 'paper'):.0f}")
         paper = ", ".join(f"{v[0]} ({algo})" for (platform, t, algo), v in PAPER_TABLE.items()
                           if platform == "sim" and t == task)  # fmt: skip
         print(f"| {task} | " + " | ".join(cells) + f" | {paper} |")
+        bars[task]["paper"] = min(
+            v[0] for (platform, t, _), v in PAPER_TABLE.items() if platform == "sim" and t == task
+        )
+    if args.figure:
+        print(f"wrote {draw(bars, args.figure)}")
+
+
+def draw(bars: dict[str, dict[str, float]], path: Path) -> Path:
+    """Steps relative to each task's bound (no reset), as grouped bars."""
+    from tactile_braille._figures import new_figure, save_figure
+
+    series = [("script paper", "pose script, no reset"), ("runs paper", "runs, no reset"),
+              ("bound released", "bound, reset per key (expected)"),
+              ("script released", "pose script, reset per key"), ("runs released", "runs, reset per key"),
+              ("paper", "paper's Table III (best)")]  # fmt: skip
+    series = [(key, label) for key, label in series if any(key in b for b in bars.values())]
+    fig, axes = new_figure(figsize=(9, 3.8))
+    ax = axes[0, 0]
+    width = 0.8 / len(series)
+    for i, (key, label) in enumerate(series):
+        ratios = [bars[t].get(key, np.nan) / bars[t]["bound paper"] for t in bars]
+        ax.bar(np.arange(len(bars)) + (i - (len(series) - 1) / 2) * width, ratios, width, label=label)
+    ax.axhline(1.0, color="black", linewidth=1, label="bound, no reset (= 1)")
+    ax.set_xticks(range(len(bars)), [t.removesuffix("-v0") for t in bars])
+    ax.set_ylabel("typing steps / bound (no reset)")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    return save_figure(fig, path)
 
 
 if __name__ == "__main__":
