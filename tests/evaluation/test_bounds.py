@@ -83,7 +83,8 @@ def test_the_continuous_bound_is_tight_a_policy_that_presses_at_the_region_edge_
     env_datasets, task
 ):
     env = gym.make(task, dataset=env_datasets[task])
-    world = _ContinuousWorld(env.unwrapped)
+    braille = env.unwrapped
+    world = _ContinuousWorld(braille.task, braille._core.backend, braille._core)
     policy = EdgePresser(env, world)
     keys = env.unwrapped.goal_keys
     gaps = []
@@ -102,9 +103,15 @@ def test_the_bound_is_never_above_the_committed_runs_steps():
     assert files, "the repository commits run records with typing evaluations"
     for file in files:
         typing = json.loads(file.read_text())
-        task = typing["task"]
-        bound = typing_bound(task, seed=typing.get("typing_seed", 0))
-        assert bound <= typing["total_steps"], file
+        recorded = typing.get("typing_bound")
+        if "Discrete" in typing["task"]:  # cheap to compute again: no dataset needed
+            bound = typing_bound(typing["task"], seed=typing.get("typing_seed", 0))
+            assert recorded in (None, bound), file
+        else:  # computed at the evaluation, in the world the run typed in
+            bound = recorded
+        # The bound is for typing every key right: a run that pressed wrong keys may take fewer steps.
+        if typing["accuracy"] == 1.0:
+            assert bound <= typing["total_steps"], file
 
 
 def test_an_evaluation_records_its_bound_and_a_proprio_policy_sees_the_pose(env_datasets):

@@ -42,12 +42,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import gymnasium as gym
 import numpy as np
+from gymnasium.utils import seeding
 
 from tactile_braille.envs.backends import DatasetBackend
+from tactile_braille.envs.core import OBSERVATION_SIZE_PX, BatchedBraille
 from tactile_braille.envs.registry import task_of
+from tactile_braille.envs.tasks import Task
 from tactile_braille.evaluation.protocol import PROTOCOLS, paper_sequences
+from tactile_braille.keyboard.layout import KeyboardLayout
 
 RASTER_MM = 0.5
 """Side of the raster cells of the continuous workspace (a divisor of the grids' half-spacings and of
@@ -91,28 +94,47 @@ def _typing_bound(task_id: str, spec, sequences: list[tuple[str, ...]], protocol
     unknown = sorted({key for s in sequences for key in s} - set(spec.goal_keys))
     if unknown:
         raise ValueError(f"keys {unknown} are not among {task_id}'s keys {spec.goal_keys}")
-    env = gym.make(task_id, **({"dataset": dataset} if dataset is not None else {}))
-    braille = env.unwrapped
-    world = _ContinuousWorld(braille) if spec.continuous else _GridWorld(braille)
+    # The evaluation's start poses come from its seeds alone: a core whose taps read no images draws
+    # them exactly as the environment's reset does (goal, then pose, from the seeded generator).
+    layout = KeyboardLayout()
+    core = BatchedBraille(spec, _Blind(layout), 1)
+    if spec.continuous:
+        world = _ContinuousWorld(spec, DatasetBackend(spec, dataset, layout=layout), core)
+    else:
+        world = _GridWorld(spec, core)
     if protocol == "released":
         return float(sum(world.expected_from_anywhere(goal) for sequence in sequences for goal in sequence))
     total = 0
     for number, sequence in enumerate(sequences):
-        if not sequence:
-            continue
-        env.reset(seed=seed + number, options={"goal_key": sequence[0]})  # the evaluation's start
-        total += world.fewest_steps(sequence)
+        if sequence:
+            core.reset(np.ones(1, dtype=bool), seeding.np_random(seed + number)[0])  # the evaluation's start
+            total += world.fewest_steps(sequence)
     return float(total)
+
+
+class _Blind:
+    """A backend that reads nothing: blank images, no key pressed (for drawing start poses)."""
+
+    def __init__(self, layout: KeyboardLayout) -> None:
+        self.layout = layout
+
+    def discrete_taps(self, codes, press, positions_mm, rng):
+        return np.zeros((len(codes), OBSERVATION_SIZE_PX, OBSERVATION_SIZE_PX), np.uint8), np.full(
+            len(codes), -1
+        )
+
+    def continuous_taps(self, x_mm, y_mm, depth_mm, rng):
+        return self.discrete_taps(x_mm, None, None, rng)
 
 
 class _GridWorld:
     """Discrete tasks: cells of the key grid, Manhattan moves, one PRESS per key."""
 
-    def __init__(self, braille) -> None:
-        self.core = braille._core
-        grid = braille.task.key_grid
+    def __init__(self, task: Task, core: BatchedBraille) -> None:
+        self.core = core
+        grid = task.key_grid
         self.cells = np.argwhere(np.ones(grid.shape, dtype=bool))
-        self.cells_of = {key: np.argwhere(grid == key) for key in braille.goal_keys}
+        self.cells_of = {key: np.argwhere(grid == key) for key in task.goal_keys}
 
     def fewest_steps(self, sequence: Sequence[str]) -> int:
         """From the sensor's cell now: the fewest steps over the sequence (best press cell per key)."""
@@ -132,11 +154,10 @@ class _GridWorld:
 class _ContinuousWorld:
     """Continuous tasks on the dataset backend: raster masks of where the sensor can be."""
 
-    def __init__(self, braille) -> None:
-        backend = braille._core.backend
+    def __init__(self, task: Task, backend: DatasetBackend, core: BatchedBraille) -> None:
         if not isinstance(backend, DatasetBackend):
             raise ValueError("typing bounds are computed on the dataset backend (the paper's simulation)")
-        self.core, task = braille._core, braille.task
+        self.core = core
         (x0, x1), (y0, y1) = task.workspace_mm
         self.low = np.array([x0, y0])
         shape = (round((x1 - x0) / RASTER_MM), round((y1 - y0) / RASTER_MM))
@@ -160,8 +181,8 @@ class _ContinuousWorld:
         centres = [self.low[i] + origin[i] + (np.arange(shape[i]) + 0.5) * RASTER_MM for i in range(2)]
         x, y = np.meshgrid(*centres, indexing="ij")
         pressed = np.stack([backend.pressed_codes(x, y, depth) for depth in backend.grid_depths_mm])
-        layout = braille.layout
-        self.regions = {key: (pressed == layout.key(key).index).any(axis=0) for key in braille.goal_keys}
+        layout = backend.layout
+        self.regions = {key: (pressed == layout.key(key).index).any(axis=0) for key in task.goal_keys}
         empty = [key for key, region in self.regions.items() if not region.any()]
         if empty:
             raise ValueError(f"no tap in the workspace presses {empty}: the dataset cannot type them")
