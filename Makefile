@@ -56,7 +56,8 @@ bench: $(STAMP)
 # and `tactile-braille archive` write them). Runs on any machine, no training needed.
 # docs/leaderboard.md ranks those records and the results files of other libraries' agents
 # (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md).
-RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json))))
+# results/tuning/ holds the runs settings were chosen on (their seeds are not reported): left out here.
+RECORDS = $(sort $(filter-out results/tuning/%,$(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json)))))
 RESULT_FILES = $(sort $(wildcard results/leaderboard/*/*.json))
 results: $(STAMP)
 	$(TB) report $(RECORDS) --output docs/results.md \
