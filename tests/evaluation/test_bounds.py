@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tactile_braille.envs.oracle import PoseScript
+from tactile_braille.evaluation import bounds
 from tactile_braille.evaluation.bounds import RASTER_MM, _ContinuousWorld, typing_bound
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 from tactile_braille.evaluation.scoring import evaluate_policy
@@ -63,7 +64,7 @@ class EdgePresser:
         braille = self.env.unwrapped
         core = braille._core
         goal = braille.goal_keys[int(core.goal[0])]
-        cells = np.argwhere(self.world.regions[goal])
+        cells = np.argwhere(self.world.pressing[goal])
         centres = self.world.low + (cells + 0.5) * RASTER_MM
         here = core.position_mm[0]
         target = centres[np.abs(centres - here).max(axis=1).argmin()]
@@ -96,6 +97,28 @@ def test_the_continuous_bound_is_tight_a_policy_that_presses_at_the_region_edge_
         gaps.append(typed.total_steps - bound)
     # Never below the bound; above it by at most the raster's rounding (one step), and mostly not at all.
     assert min(gaps) >= 0 and max(gaps) <= 1 and np.mean(gaps) < 0.2, gaps
+
+
+@pytest.mark.parametrize("task", CONTINUOUS)
+def test_a_continuous_bound_with_a_reset_per_key_is_for_the_starts_the_evaluation_draws(env_datasets, task):
+    env = gym.make(task, dataset=env_datasets[task])
+    braille = env.unwrapped
+    policy = EdgePresser(env, _ContinuousWorld(braille.task, braille._core.backend, braille._core))
+    sequences = [tuple(braille.goal_keys[:4]), tuple(braille.goal_keys[-3:])]
+    typed = type_sequences(policy, env, sequences, seed=7, protocol="released")
+    bound = typing_bound(task, sequences, protocol="released", seed=7, dataset=env_datasets[task])
+    assert typed.accuracy == 1.0 and bound <= typed.total_steps <= bound + 2
+
+
+def test_pruning_dominated_masks_loses_no_better_path(env_datasets, monkeypatch):
+    task = CONTINUOUS[1]
+    keys = gym.make(task, dataset=env_datasets[task]).unwrapped.goal_keys
+    sequences = [tuple(keys[i::5][:4]) for i in range(3)]
+    pruned = [typing_bound(task, [s], seed=2, dataset=env_datasets[task]) for s in sequences]
+    bounds._BOUNDS.clear()
+    monkeypatch.setattr(_ContinuousWorld, "_undominated", lambda self, entries: entries)
+    assert [typing_bound(task, [s], seed=2, dataset=env_datasets[task]) for s in sequences] == pruned
+    bounds._BOUNDS.clear()
 
 
 def test_the_bound_is_never_above_the_committed_runs_steps():
@@ -140,3 +163,10 @@ def test_bad_requests_are_refused():
         typing_bound("DiscreteArrows-v0", protocol="mine")
     with pytest.raises(ValueError, match="unknown task"):
         typing_bound("Pendulum-v9")
+
+
+def test_a_tactile_score_refuses_an_environment_that_shows_the_pose(env_datasets):
+    task = CONTINUOUS[0]
+    env = gym.make(task, dataset=env_datasets[task], proprio=True)
+    with pytest.raises(ValueError, match="tactile-track policy must not see the arm's pose"):
+        evaluate_policy(lambda observation: np.zeros(3, np.float32), task, env=env, track="tactile")

@@ -61,7 +61,8 @@ FRAME_LABELS = 5
 """Labels of a frame: sensor x, y, depth (mm), pressed key, key under the sensor."""
 
 Encoder = Callable[[np.ndarray, np.ndarray], np.ndarray]
-"""(B, 1, H, W) uint8 images -> (B, size) float32 features."""
+"""(B, 1, H, W) uint8 images and their frames' labels (B, FRAME_LABELS; NaN: none) -> (B, size) float32
+features (a touch agent with pose inputs appends each frame's pose)."""
 
 
 def _goal_index(one_hot: np.ndarray) -> int:

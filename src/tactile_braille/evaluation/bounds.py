@@ -16,19 +16,24 @@ simulation), for the sequences and start poses of a typing evaluation
 * **Continuous tasks.** A step moves the sensor by up to the task's largest
   move in x and in y (a box; the position stays in the workspace) and taps
   at any depth in [2, 8] mm; the tap presses what the stored grid sample
-  nearest to it pressed. The workspace is rasterised at :data:`RASTER_MM`;
-  a key's *press region* is every raster cell a tap at some depth presses it
-  in. The places the sensor can have pressed each key after a given number of
-  steps are tracked as raster masks (the last masks dilated by the moves,
-  intersected with the key's press region), again from the evaluation's start
-  pose. A raster cell counts as reached as soon as any point of it is, so the
-  count is never above the true fewest: a lower bound, tight to the raster.
+  nearest to it pressed. The workspace is rasterised at :data:`RASTER_MM`
+  into half-open cells, whose edges fall on the samples' rounding edges; a
+  key's *press region* is every cell a tap at some depth presses it in, grown
+  by one cell (a point on a cell's edge may round to the neighbour). The
+  places the sensor can have pressed each key after a given number of steps
+  are cell masks: the last masks grown by the moves (exactly: a cell grown by
+  a move is a whole number of cells), intersected with the key's region, from
+  the evaluation's start pose. Each mask holds every point the sensor can
+  truly be at, so the count is never above the true fewest: a lower bound,
+  loose by at most the regions' one-cell margin (0.5 mm) per key.
 
 With a reset per key (``protocol="released"``) each key starts from a fresh
-uniformly random pose drawn from a generator the policy's own steps advance,
-so no start is known in advance: the bound is then the *expected* fewest
-steps over uniform starts (exact for discrete tasks, a lower bound on it for
-continuous ones), and a policy can come below it by luck of its starts.
+random pose. On the continuous tasks those are drawn from the generator the
+sequence's seed starts, which nothing else draws from on the dataset
+backend: the bound is for those starts, as above. On the discrete tasks the
+taps draw their stored images from the same generator, so the starts depend
+on the policy's own steps: the bound is then the *expected* fewest steps over
+uniformly random starts (exact), and a policy can come below it by luck.
 
 The same script with the pose gives an upper yardstick
 (``benchmarks/typing_bounds.py`` prints both, and the touch-only optimum).
@@ -68,9 +73,9 @@ def typing_bound(
 
     ``sequences`` default to the paper's evaluation sequences; ``seed`` is the
     typing evaluation's seed (sequence ``i`` starts from the pose that
-    ``reset(seed=seed + i)`` draws). ``protocol="paper"``: exact for those
-    starts (continuous tasks: to :data:`RASTER_MM`); ``"released"``: the
-    expectation over uniformly random starts.
+    ``reset(seed=seed + i)`` draws). ``protocol="paper"``: for those starts;
+    ``"released"``: for the starts the resets draw (continuous tasks), or the
+    expectation over uniformly random starts (discrete tasks).
     """
     task_id = task if "/" in task else f"tactile_braille/{task}"
     spec = task_of(task_id)
@@ -102,14 +107,22 @@ def _typing_bound(task_id: str, spec, sequences: list[tuple[str, ...]], protocol
         world = _ContinuousWorld(spec, DatasetBackend(spec, dataset, layout=layout), core)
     else:
         world = _GridWorld(spec, core)
-    if protocol == "released":
-        return float(sum(world.expected_from_anywhere(goal) for sequence in sequences for goal in sequence))
-    total = 0
+    total = 0.0
+    everywhere = np.ones(1, dtype=bool)
     for number, sequence in enumerate(sequences):
-        if sequence:
-            core.reset(np.ones(1, dtype=bool), seeding.np_random(seed + number)[0])  # the evaluation's start
+        if not sequence:
+            continue
+        rng = seeding.np_random(seed + number)[0]  # the evaluation's first reset of the sequence
+        if protocol == "paper":
+            core.reset(everywhere, rng)
             total += world.fewest_steps(sequence)
-    return float(total)
+        elif spec.continuous:  # a reset per key, all drawn from the sequence's generator (taps draw nothing)
+            for goal in sequence:
+                core.reset(everywhere, rng)
+                total += world.fewest_steps((goal,))
+        else:  # discrete taps draw their stored images from the same generator: starts are not known
+            total += math.fsum(world.expected_from_anywhere(goal) for goal in sequence)
+    return round(total, 6)
 
 
 class _Blind:
@@ -155,47 +168,45 @@ class _ContinuousWorld:
     """Continuous tasks on the dataset backend: raster masks of where the sensor can be."""
 
     def __init__(self, task: Task, backend: DatasetBackend, core: BatchedBraille) -> None:
-        if not isinstance(backend, DatasetBackend):
-            raise ValueError("typing bounds are computed on the dataset backend (the paper's simulation)")
         self.core = core
         (x0, x1), (y0, y1) = task.workspace_mm
         self.low = np.array([x0, y0])
         shape = (round((x1 - x0) / RASTER_MM), round((y1 - y0) / RASTER_MM))
-        if not np.allclose(np.array(shape) * RASTER_MM, [x1 - x0, y1 - y0]):
-            raise ValueError(
-                f"the workspace {task.workspace_mm} is not a whole number of {RASTER_MM} mm cells"
-            )
         origin = np.array(task.frame_origin_mm)
         step = backend._grid_step[:2]
         edges = (backend._grid_start[:2] - origin - step / 2 - self.low) / RASTER_MM  # first cell edges
-        if not (
-            np.allclose(edges, np.round(edges), atol=1e-6)
-            and np.allclose(step / RASTER_MM, np.round(step / RASTER_MM))
-        ):
-            raise ValueError(
-                f"the dataset's grid (spacing {step.tolist()} mm) does not put its cells' edges on the "
-                f"{RASTER_MM} mm raster of the workspace: its bound would not be exact"
-            )
+        for what, cells in (("the workspace's sides", np.array([x1 - x0, y1 - y0]) / RASTER_MM),
+                            ("the largest move", np.array([task.max_move_mm]) / RASTER_MM),
+                            ("the dataset grid's spacing", step / RASTER_MM),
+                            ("the dataset grid's cell edges", edges)):  # fmt: skip
+            if not np.allclose(cells, np.round(cells), atol=1e-6):
+                raise ValueError(f"{what} do not fall on the {RASTER_MM} mm raster: no exact bound here")
         self.move_cells = round(task.max_move_mm / RASTER_MM)
         self.max_moves = math.ceil(max(shape) / self.move_cells)  # enough to cross the workspace
         centres = [self.low[i] + origin[i] + (np.arange(shape[i]) + 0.5) * RASTER_MM for i in range(2)]
         x, y = np.meshgrid(*centres, indexing="ij")
         pressed = np.stack([backend.pressed_codes(x, y, depth) for depth in backend.grid_depths_mm])
         layout = backend.layout
-        self.regions = {key: (pressed == layout.key(key).index).any(axis=0) for key in task.goal_keys}
-        empty = [key for key, region in self.regions.items() if not region.any()]
+        regions = {key: (pressed == layout.key(key).index).any(axis=0) for key in task.goal_keys}
+        empty = [key for key, region in regions.items() if not region.any()]
         if empty:
             raise ValueError(f"no tap in the workspace presses {empty}: the dataset cannot type them")
+        # A raster cell is half-open, [x, x + r) x [y, y + r), and wholly on one side of the samples'
+        # rounding edges, but for its left and lower edges: a point on one of those may round to the
+        # neighbouring sample. Growing each region by one cell takes such points in.
+        self.pressing = regions  # the cells whose centre presses each key
+        self.regions = {key: _dilate(region, 1) for key, region in regions.items()}
 
     def _reach(self, mask: np.ndarray, moves: int) -> np.ndarray:
-        """Raster cells any point of which is within ``moves`` steps of a point of ``mask``'s cells."""
-        return _dilate(mask, moves * self.move_cells + 1)
+        """The cells holding every point within ``moves`` steps of a point of ``mask``'s cells (a cell
+        [x, x + r) grown by m on each side is exactly the cells from x - m to x + r + m)."""
+        return _dilate(mask, moves * self.move_cells)
 
     def fewest_steps(self, sequence: Sequence[str]) -> int:
         """From the sensor's position now: the fewest steps over the sequence (a lower bound)."""
         start = np.zeros(next(iter(self.regions.values())).shape, dtype=bool)
         cell = np.floor((self.core.position_mm[0] - self.low) / RASTER_MM).astype(int)
-        start[tuple(np.clip(cell, 0, np.array(start.shape) - 1))] = True
+        start[tuple(np.clip(cell, 0, np.array(start.shape) - 1))] = True  # the far edge: the last cell
         frontier = [(0, start)]  # (steps so far, raster cells the sensor can be in)
         for goal in sequence:
             reached: dict[int, np.ndarray] = {}
@@ -209,21 +220,13 @@ class _ContinuousWorld:
 
     def _undominated(self, entries: list[tuple[int, np.ndarray]]) -> list[tuple[int, np.ndarray]]:
         """Drop an entry whose cells all lie within its extra steps' moves of a cheaper entry's: any
-        way on from it is as short from there (moves of exactly ``extra * move_cells`` raster cells,
-        so that chaining them with a later reach stays inside the direct reach)."""
+        way on from it is as short from there (reaches add up exactly: growing by a then by b cells is
+        growing by a + b)."""
         kept: list[tuple[int, np.ndarray]] = []
         for steps, mask in entries:
-            if not any(not (mask & ~_dilate(k_mask, (steps - k_steps) * self.move_cells)).any()
-                       for k_steps, k_mask in kept):  # fmt: skip
+            if not any(not (mask & ~self._reach(k_mask, steps - k_steps)).any() for k_steps, k_mask in kept):
                 kept.append((steps, mask))
         return kept
-
-    def expected_from_anywhere(self, goal: str) -> float:
-        """Mean fewest steps to press ``goal`` from a uniformly random raster cell."""
-        steps = np.zeros(self.regions[goal].shape)
-        for moves in range(self.max_moves, 0, -1):
-            steps[self._reach(self.regions[goal], moves)] = moves
-        return float(steps.mean())
 
 
 def _dilate(mask: np.ndarray, cells: int) -> np.ndarray:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import re
 import textwrap
 from dataclasses import dataclass, field
@@ -287,8 +288,9 @@ def _bound(record: RunRecord, protocol: str) -> float | None:
     task = task_of(task_id) if task_id in ENV_IDS else None
     if task is None or (record.config is not None and record.config.backend != "dataset"):
         return None
-    if task.continuous and record.world != GENERATOR_VERSION:
-        return None
+    default_world = record.config is not None and record.config.dataset is None
+    if task.continuous and not (default_world and record.world == GENERATOR_VERSION):
+        return None  # the bound depends on the grid: only the default dataset's is known here
     return typing_bound(task_id, protocol=protocol, seed=record.typing.get("typing_seed", 0))
 
 
@@ -297,8 +299,8 @@ def _bound_cell(values: list[float | None]) -> str:
     values = [v for v in values if v is not None]
     if not values:
         return "-"
-    low, high = min(values), max(values)
-    return f"{low:.0f}" if round(low) == round(high) else f"{low:.0f}-{high:.0f}"
+    low, high = math.floor(min(values) + 1e-6), math.floor(max(values) + 1e-6)  # rounded down: bounds
+    return f"{low}" if low == high else f"{low}-{high}"
 
 
 # ------------------------------------------------------------------ figures

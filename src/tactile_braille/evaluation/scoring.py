@@ -23,6 +23,7 @@ import functools
 import hashlib
 import itertools
 import json
+import warnings
 from collections.abc import Callable
 from dataclasses import MISSING, asdict, dataclass, field, fields
 
@@ -30,7 +31,7 @@ import gymnasium as gym
 import numpy as np
 
 from tactile_braille._version import __version__
-from tactile_braille.envs.core import _MOVES, _PRESS
+from tactile_braille.envs.core import _MOVES, _PRESS, PROPRIO_KEY
 from tactile_braille.envs.registry import task_name, task_of
 from tactile_braille.envs.tasks import KEY_GRIDS
 from tactile_braille.evaluation.protocol import (
@@ -296,8 +297,15 @@ def evaluate_policy(
         )
     elif task_name(env.spec.id) != task_name(task_id):
         raise ValueError(f"the environment is {env.spec.id}, not {task_id}")
+    elif track == "tactile" and PROPRIO_KEY in env.observation_space.spaces:
+        raise ValueError(
+            f"a tactile-track policy must not see the arm's pose, but this environment's observations "
+            f"carry {PROPRIO_KEY!r} (made with proprio=True): score it as track='proprio' or use a "
+            "tactile environment"
+        )
     agent = as_agent(policy, env, task_name(task_id))
     sequences = paper_sequences(keys)
+    bound = _bound(env, sequences, protocol, seed)
     result = type_sequences(agent, env, sequences, seed=seed, protocol=protocol)
     conditions = protocol_conditions(task_id, protocol, sequences, env.spec.max_episode_steps, seed,
                                      env.unwrapped.world)  # fmt: skip
@@ -308,7 +316,7 @@ def evaluate_policy(
         confusion={"rows": list(result.keys), "columns": list(result.columns),
                    "counts": result.confusion().tolist()},
         touch_optimum=None if task_of(task_id).continuous else touch_optimum(keys, sequences, protocol),
-        typing_bound=_bound(env, sequences, protocol, seed),
+        typing_bound=bound,
     )  # fmt: skip
     if keys == "alphabet" and sentences:
         report.sentences = type_sentences(agent, env, seed + 1_000)
@@ -317,14 +325,19 @@ def evaluate_policy(
 
 def _bound(env: gym.Env, sequences, protocol: str, seed: int) -> float | None:
     """:func:`~tactile_braille.evaluation.bounds.typing_bound` in ``env``'s world (None off the dataset
-    backend: the bound is of the paper's simulation)."""
+    backend: the bound is of the paper's simulation; None, with a warning, for a dataset whose grid it cannot
+    follow)."""
     from tactile_braille.envs.backends import DatasetBackend
     from tactile_braille.evaluation.bounds import typing_bound
 
     backend = env.unwrapped._core.backend
     if not isinstance(backend, DatasetBackend):
         return None
-    return typing_bound(env.spec.id, sequences, protocol, seed, dataset=backend.dataset)
+    try:
+        return typing_bound(env.spec.id, sequences, protocol, seed, dataset=backend.dataset)
+    except ValueError as error:  # a dataset whose grid the bound cannot follow: score without it
+        warnings.warn(f"no typing bound for this evaluation: {error}", stacklevel=3)
+        return None
 
 
 def _task_keys(task_id: str) -> str:
