@@ -114,12 +114,11 @@ class TouchAgent:
                     f"{PROPRIO_KEY!r}: make its environment with proprio=True (the proprio track)"
                 )
             poses = np.asarray(observation[PROPRIO_KEY], dtype=np.float32)[None]
-        features = {
+        return {
             **{name: value for name, value in observation.items() if name != PROPRIO_KEY},
             "observation": self.encode(observation["observation"][None], poses)[0],
             "desired_goal": self.goals(np.asarray(observation["desired_goal"], dtype=np.float32)),
         }
-        return features
 
     def policy_action(self, observation: dict, *args, **kwargs):
         return self.agent.policy_action(self.features(observation), *args, **kwargs)
