@@ -61,6 +61,8 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = "elsewhere.h5", ["elsewhere.h5"]
         if name == "start_steps":  # a touch encoder needs at least 10 (refused otherwise, tested below)
             value, words = 30, ["30"]
+        if name == "touch.labels":  # pose inputs need the robot's labels (refused otherwise, test_tracks)
+            value, words = "robot", ["robot"]
         flag = "--" + name.replace("_", "-")
         argv += [flag, *words] if words is not None else [flag if value else "--no-" + flag[2:]]
         wanted[name] = list(value) if isinstance(value, tuple) else value

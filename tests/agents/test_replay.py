@@ -610,6 +610,26 @@ def test_labelled_frames_hold_the_labelled_frames_and_the_episode_in_progress():
     assert taps.under == under.tolist()
 
 
+def test_frame_pairs_are_each_steps_two_frames_its_action_and_its_key_the_episode_in_progress_too():
+    buffer, frames = all_buffer(), Frames()
+    table = fill(buffer, frames)
+    buffer.start_episode(replay_observation(frames(), 1))
+    acted = np.full(replay_helpers.PREVIOUS, 7.0, np.float32)
+    buffer.add_step(99, 0.0, {**replay_observation(frames(), 1, 2), "previous_action": acted}, False)
+    images, pairs, previous, pressed = buffer.frame_pairs()
+    expected, first = [], 0
+    for _, steps, _ in (*EPISODES, (1, 1, 2)):
+        expected += [(first + step, first + step + 1) for step in range(steps)]
+        first += steps + 1
+    assert len(images) == len(frames.given) and pairs.shape == (STEPS + 1, 2)
+    np.testing.assert_array_equal(images[pairs[:, 0]], as_images([frames.given[i] for i, _ in expected]))
+    np.testing.assert_array_equal(images[pairs[:, 1]], as_images([frames.given[j] for _, j in expected]))
+    assert pressed.tolist() == [table[i]["achieved"] for i in range(STEPS)] + [2]
+    assert not previous[:STEPS].any() and (previous[STEPS] == 7.0).all() and previous.dtype == np.float32
+    with pytest.raises(ValueError, match="holds features"):
+        EpisodeReplayBuffer(10, GOALS, (), 2, observation_shape=(FEATURES,)).frame_pairs()
+
+
 # ---------------------------------------------------------------- poses for asymmetric critics
 def one_step_episodes(buffer: EpisodeReplayBuffer, count: int, labelled: bool = True) -> list[np.ndarray]:
     """``count`` one-step episodes; returns the (first, next) labels of each, in order."""

@@ -156,3 +156,39 @@ def test_a_touch_agent_with_pose_inputs_appends_the_standardised_pose_of_each_fr
     features = agent.features(observation)
     assert "sensor_pose" not in features  # it went into the vector
     np.testing.assert_allclose(features["observation"], vectors[0], atol=1e-6)
+
+
+# ---------------------------------------------------------------- goals placed on the layout learnt from touch
+def test_learnt_goal_positions_come_from_the_encoders_key_map_and_travel_with_its_snapshots(discrete_env):
+    torch.manual_seed(0)
+    encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8, labels="observation")
+    space = feature_space(discrete_env.observation_space, encoder.readout_size, goal_positions=True)
+    agent = TouchAgent(DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,))), encoder,
+                       inputs="readout", learnt_positions=True)  # fmt: skip
+    goals = np.eye(GOALS, dtype=np.float32)
+    np.testing.assert_array_equal(agent.goals(goals)[:, GOALS:], 0.0)  # no key located yet: the centre
+    places = np.arange(2 * GOALS, dtype=np.float32).reshape(GOALS, 2)
+    places[1] = np.nan  # never reached
+    agent.touch.key_map.copy_(torch.as_tensor(places))
+    placed = agent.goals(goals)
+    np.testing.assert_array_equal(placed[:, :GOALS], goals)
+    np.testing.assert_array_equal(placed[:, GOALS:], np.nan_to_num(places))
+    np.testing.assert_array_equal(agent.goals(np.zeros((1, GOALS), np.float32))[:, GOALS:], 0.0)  # no goal
+    # The readout ends with where the key read under the sensor lies on that map.
+    observation, _ = discrete_env.reset(seed=0)
+    readout = agent.touch.read(observation["observation"][None])[0]
+    under = readout[3 + GOALS + 1 : 3 + 2 * (GOALS + 1)]
+    np.testing.assert_allclose(readout[-2:], under[:GOALS] @ np.nan_to_num(places), rtol=1e-5)
+    other = TouchAgent(DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,))),
+                       TouchEncoder(GOALS, features=FEATURES, hidden=8, labels="observation"),
+                       inputs="readout", learnt_positions=True)  # fmt: skip
+    other.load_policy_state_dict(through_file(agent.policy_state_dict()))
+    np.testing.assert_array_equal(other.goals(goals), placed)
+
+
+def test_learnt_goal_positions_need_an_encoder_fitted_on_observations(discrete_env):
+    encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8)  # the robot's labels
+    space = feature_space(discrete_env.observation_space, encoder.readout_size, goal_positions=True)
+    learner = DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,)))
+    with pytest.raises(ValueError, match="learnt_positions takes the key map of an encoder fitted on obs"):
+        TouchAgent(learner, encoder, inputs="readout", learnt_positions=True)

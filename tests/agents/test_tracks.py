@@ -51,6 +51,14 @@ def test_a_tactile_run_using_pose_or_layout_is_refused_with_what_it_used(changes
         preset_config("fast", "tactile_braille/ContinuousAlphabet-v0", "sac", track="tactile")
 
 
+@pytest.mark.parametrize("changes", [{"touch": {"pose_inputs": True}}, {"agent": {"critic_pose": True}}])
+def test_an_encoder_fitted_on_observations_has_no_pose_to_show(changes):
+    config = preset_config("fast-tactile", "tactile_braille/ContinuousAlphabet-v0", "sac", track="proprio")
+    assert config.touch.labels == "observation" and not proprio_settings(config)
+    with pytest.raises(ValueError, match="which touch.labels='observation' does not record"):
+        config.with_changes(**changes)
+
+
 def test_the_command_line_refuses_an_out_of_track_run_before_writing_anything(tmp_path, capsys):
     run = tmp_path / "run"
     assert main(["train", "DiscreteArrows-v0", "dqn", "--touch.enabled", "--run-dir", str(run)]) == 2
@@ -111,13 +119,21 @@ def test_a_tactile_run_learns_identically_when_all_but_its_observations_and_rewa
     env_datasets, tmp_path, monkeypatch, algo
 ):
     tactile = touch_config(env_datasets, algo, track="tactile", touch={"enabled": False}, epochs=2)
+    # fast-tactile's touch encoder: odometry, pressed keys and the layout learnt from its own presses
+    learnt = {"labels": "observation", "inputs": "readout", "goal_positions": True}
+    odometry = touch_config(env_datasets, algo, track="tactile", touch=learnt, epochs=2)
     proprio = touch_config(env_datasets, algo, epochs=2)
-    assert (tactile.track, proprio.track) == ("tactile", "proprio")
-    for config, same in ((tactile, True), (proprio, False)):
-        plain = _learnt(config, tmp_path / f"{config.track}-plain", monkeypatch, scrambled=False)
-        scrambled = _learnt(config, tmp_path / f"{config.track}-scrambled", monkeypatch, scrambled=True)
-        assert (plain == scrambled) is same, config.track
-    assert json.loads((tmp_path / "tactile-plain" / "config.json").read_text())["track"] == "tactile"
+    assert (tactile.track, odometry.track, proprio.track) == ("tactile", "tactile", "proprio")
+    for name, config, same in (
+        ("paper", tactile, True),
+        ("odometry", odometry, True),
+        ("proprio", proprio, False),
+    ):
+        plain = _learnt(config, tmp_path / f"{name}-plain", monkeypatch, scrambled=False)
+        scrambled = _learnt(config, tmp_path / f"{name}-scrambled", monkeypatch, scrambled=True)
+        assert (plain == scrambled) is same, name
+    assert json.loads((tmp_path / "paper-plain" / "config.json").read_text())["track"] == "tactile"
+    assert (tmp_path / "odometry-plain" / "touch.json").exists()  # its encoder was fitted, and used
 
 
 def test_a_run_with_pose_inputs_acts_on_the_pose_its_observation_carries(env_datasets, tmp_path):

@@ -23,7 +23,7 @@ from envs_helpers import assert_same
 from tactile_braille.datasets import default_dataset_path
 from tactile_braille.envs import ENV_IDS, MAX_EPISODE_STEPS
 from tactile_braille.envs.continuous import ContinuousBrailleEnv
-from tactile_braille.envs.core import compute_reward
+from tactile_braille.envs.core import action_effects, compute_reward
 from tactile_braille.envs.discrete import DiscreteBrailleEnv
 from tactile_braille.envs.oracle import oracle_action
 from tactile_braille.envs.rendering import save_gif
@@ -471,6 +471,39 @@ def test_continuous_previous_action_is_zero_then_the_clipped_action(env_id, back
     np.testing.assert_array_equal(observation["previous_action"], action)
     observation, _ = env.reset()
     assert not observation["previous_action"].any()
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_action_effects_read_what_each_step_did_off_its_previous_action(env_id, make):
+    """The planar move each observation's previous action documents is the move the sensor made, or
+    one the grid's or the workspace's edge shortened (never lengthened or reversed); presses and tap
+    depths are read as documented; a reset did nothing known."""
+    env = make(env_id)
+    continuous = env.unwrapped.continuous
+    scale = env.unwrapped.task.max_move_mm
+    observation, info = env.reset(seed=3)
+    assert np.isnan(action_effects(observation["previous_action"][None], continuous)).all()
+    exact = 0
+    core = env.unwrapped._core
+
+    def where():  # the sensor's position: in mm, or its (row, column) on the discrete key grid
+        return info["sensor_pose_mm"][:2] / scale if continuous else core.cell[0].astype(float)
+
+    for action in _actions(env_id, 60, seed=4):
+        before = where()
+        observation, _, terminated, truncated, info = env.step(action)
+        effect = action_effects(observation["previous_action"][None], continuous)[0]
+        moved = where() - before
+        if continuous:
+            assert effect[2] == pytest.approx(float(np.clip(action[2], -1, 1)))
+        else:
+            assert effect[2] == (action == PRESS)
+            assert effect[:2].tolist() == list(MOVES.get(action, (0, 0)))
+        assert np.all(np.abs(moved) <= np.abs(effect[:2]) + 1e-4) and np.all(moved * effect[:2] >= 0)
+        exact += np.allclose(moved, effect[:2], atol=1e-4)
+        if terminated or truncated:
+            observation, info = env.reset()
+    assert exact >= 25  # most steps move as their action says
 
 
 @pytest.mark.parametrize("backend", SIMULATED_BACKENDS)

@@ -18,7 +18,10 @@ from tactile_braille.supervised.touch import (
     LabelledTaps,
     TouchEncoder,
     TouchEncoderConfig,
+    Transitions,
     fit_touch_encoder,
+    fit_touch_odometry,
+    key_graph,
 )
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -197,6 +200,115 @@ def test_a_refit_starts_from_the_given_encoders_weights():
     assert all(torch.equal(first.state_dict()[name], value) for name, value in weights.items())
     assert not any(p.requires_grad for p in first.parameters())
     assert not refit.training and not any(p.requires_grad for p in refit.parameters())
+
+
+# ---------------------------------------------------------------- touch odometry
+def synthetic_steps(count: int, seed: int, shuffle_effects: bool = False) -> tuple[Transitions, np.ndarray]:
+    """A random walk over a 6x6 grid of the squares of :func:`synthetic_taps` (a move of up to one
+    cells each way, stopped at the edges), pressing the key of its column pair (a bar along the top)
+    one step in five; and the cell of every frame, which the fit never sees."""
+    rng = np.random.default_rng(seed)
+    cell, cells, images, effects, pressed = rng.integers(0, 6, 2), [], [], [], []
+
+    def tap(cell, press):
+        image = np.zeros((100, 100, 1), np.uint8)
+        column, row = cell
+        image[20 + 10 * row : 32 + 10 * row, 20 + 10 * column : 32 + 10 * column] = 255
+        if press:
+            image[:10, 30 * (column // 2) : 30 * (column // 2) + 20] = 255
+        images.append(image)
+        cells.append(cell)
+
+    tap(cell, False)
+    for _ in range(count):
+        press = rng.random() < 0.2
+        move = np.zeros(2, np.int64) if press else rng.integers(-1, 2, 2)
+        cell = np.clip(cell + move, 0, 5)
+        tap(cell, press)
+        effects.append([*move, float(press)])
+        pressed.append(int(cell[0] // 2) if press else -1)
+    effects = np.array(effects, np.float32)
+    if shuffle_effects:
+        effects = effects[rng.permutation(count)]
+    pairs = np.stack([np.arange(count), np.arange(1, count + 1)], -1)
+    steps = Transitions(np.moveaxis(np.stack(images), -1, 1), pairs, effects, np.array(pressed))
+    return steps, np.array(cells, np.float32)
+
+
+def _units(model, images: np.ndarray) -> np.ndarray:
+    """The pose head's readout of images, in action units."""
+    return model.read(images)[:, :3] * model.pose_scale.numpy() + model.pose_mean.numpy()
+
+
+def test_touch_odometry_learns_where_each_tap_is_up_to_a_translation_and_where_each_key_was_pressed():
+    torch.manual_seed(0)
+    config = TouchEncoderConfig(features=16, hidden=64, epochs=20, batch_size=16, validation=0.2)
+    steps, cells = synthetic_steps(300, 0)
+    model, metrics = fit_touch_odometry(steps, SYNTHETIC_KEYS, config, seed=0)
+    assert set(metrics) == {
+        "touch/taps", "touch/keys_located", "touch/odometry_error", "touch/key_accuracy", "touch/outcome_accuracy"
+    }  # fmt: skip
+    assert metrics["touch/taps"] == 301
+    assert metrics["touch/keys_located"] == np.isfinite(model.key_map.numpy()).all(-1).sum()
+    assert metrics["touch/key_accuracy"] >= 0.9 and metrics["touch/odometry_error"] < 0.6, metrics
+    # The key a press will press, foreseen from the tap before it: here, the key under the sensor,
+    # which the readout's last distribution gives (a press without a move).
+    # Chance is a third at best; this short a fit foresees about 2 presses in 3.
+    assert metrics["touch/outcome_accuracy"] >= 0.45, metrics
+    under = model.read(steps.images)[:, 3 + SYNTHETIC_KEYS + 1 :].argmax(-1)
+    assert (under == cells[:, 0] // 2).mean() >= 0.45
+    # Coordinates: the cells, shifted by one translation (the odometry's free gauge), read off the
+    # readout (within half a cell; a collapsed or untrained head is off by 1.5 cells); the readout
+    # itself is standardised (centred on the frames, unit spread).
+    readout = model.read(steps.images)
+    np.testing.assert_allclose(readout[:, :3].mean(0), 0.0, atol=1e-3)
+    np.testing.assert_allclose(readout[:, :3].std(0), 1.0, atol=0.01)
+    offset = _units(model, steps.images)[:, :2] - cells
+    assert np.median(np.abs(offset - np.median(offset, 0))) < 0.5, offset.std(0)
+    # The key map: the key graph of the keys read under the frames, which the readout ends with.
+    under = readout[:, 3 + SYNTHETIC_KEYS + 1 : 3 + 2 * (SYNTHETIC_KEYS + 1)]
+    expected = key_graph(under, steps.pairs, steps.effects[:, :2])
+    np.testing.assert_allclose(model.key_map.numpy(), expected, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(readout[:, -2:], under[:, :-1] @ np.nan_to_num(expected), rtol=1e-4, atol=1e-5)
+    assert model.labels == "observation" and model.readout_size == 3 + 2 * (SYNTHETIC_KEYS + 1) + 2
+    assert not model.training and not any(p.requires_grad for p in model.parameters())
+
+
+def test_the_key_graph_places_keys_by_the_moves_between_them_and_only_those_read_surely():
+    # Keys 0-3 on a row 2 cells apart, key 4 never reached; frames read surely except the last two.
+    truth = np.array([[0.0, 0.0], [0.0, 2.0], [0.0, 4.0], [0.0, 6.0]])
+    reads = np.array([0, 1, 2, 3, 5, 2, 0, 1])  # 5: none
+    under = np.full((len(reads), 6), 0.01)
+    under[np.arange(len(reads)), reads] = 0.95
+    under[-2:] = 1 / 6  # unsure: their step is not used
+    pairs = np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 0], [0, 0], [6, 7], [2, 7]])
+    moves = np.zeros((len(pairs), 2))
+    for row, (a, b) in enumerate(pairs):
+        if reads[a] < 4 and reads[b] < 4:
+            moves[row] = truth[reads[b]] - truth[reads[a]]
+    moves[6] = [0.0, -1.0]  # a move that an edge stopped: from a key to itself, not used
+    moves[7] = [9.0, 9.0]  # an unsure read: not used
+    places = key_graph(under, pairs, moves)
+    np.testing.assert_allclose(places[:4], truth - truth.mean(0), atol=1e-9)
+    assert np.isnan(places[4]).all()
+    assert np.isnan(key_graph(under, pairs[6:], moves[6:])).all()  # nothing sure: nothing placed
+
+
+def test_touch_odometry_skips_steps_after_a_reset_and_refuses_bad_steps():
+    config = TouchEncoderConfig(features=4, hidden=8, epochs=1)
+    steps, _ = synthetic_steps(30, 1)
+    steps.effects[::3] = np.nan  # frames after a reset: no action led to them
+    model, metrics = fit_touch_odometry(steps, SYNTHETIC_KEYS, config)
+    assert np.isfinite(model.pose_mean.numpy()).all() and np.isfinite(metrics["touch/odometry_error"])
+    with pytest.raises(ValueError, match="at least 10 steps"):
+        fit_touch_odometry(synthetic_steps(9, 0)[0], SYNTHETIC_KEYS, config)
+    wrong = Transitions(steps.images, steps.pairs, steps.effects, np.where(steps.pressed >= 0, 3, -1))
+    with pytest.raises(ValueError, match="pressed key 3, but the task has 3 keys"):
+        fit_touch_odometry(wrong, SYNTHETIC_KEYS, config)
+    with pytest.raises(ValueError, match="differ in number"):
+        Transitions(steps.images, steps.pairs, steps.effects[:-1], steps.pressed)
+    with pytest.raises(ValueError, match="pairs index 31 frames"):
+        Transitions(steps.images, steps.pairs + 1, steps.effects, steps.pressed)
 
 
 # ---------------------------------------------------------------- the readout

@@ -38,6 +38,7 @@ Backend = Literal["dataset", "render", "rig"]
 Precision = Literal["fp32", "bf16"]
 RelabelRule = Literal["paper", "all"]
 TouchInputs = Literal["features", "readout"]
+TouchLabels = Literal["robot", "observation"]
 TargetUpdate = Literal["update", "epoch"]
 QLoss = Literal["mse", "huber"]
 Track = Literal["tactile", "proprio"]
@@ -45,6 +46,7 @@ Track = Literal["tactile", "proprio"]
 PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
 RELABELLING: tuple[str, ...] = typing.get_args(RelabelRule)
 TOUCH_INPUTS: tuple[str, ...] = typing.get_args(TouchInputs)
+TOUCH_LABELS: tuple[str, ...] = typing.get_args(TouchLabels)
 BACKENDS: tuple[str, ...] = typing.get_args(Backend)
 TRACKS: tuple[str, ...] = typing.get_args(Track)
 """The benchmark's tracks (docs/benchmark.md). ``tactile``: the paper's rules, the agent and every loss
@@ -291,13 +293,19 @@ class TouchConfig:
     """The touch encoder (not the paper's; :mod:`~tactile_braille.supervised.touch`).
 
     Attributes:
-        enabled: label every frame with the sensor pose and keys (what the robot knows), fit a touch
-            encoder on the labelled frames after ``start_steps`` and learn on its features.
+        enabled: fit a touch encoder on the run's own taps after ``start_steps`` and learn on its
+            features.
+        labels: what the encoder learns from. ``"robot"``: every frame labelled with what a calibrated
+            robot knows, the sensor pose and the keys the layout places there (the ``proprio``
+            track). ``"observation"``: the observation dictionary alone (the ``tactile`` track):
+            touch odometry, coordinates in which each step moves by its previous action, and the
+            key each achieved goal names (:func:`~tactile_braille.supervised.touch.fit_touch_odometry`).
         epochs: passes of the encoder's first fit over those taps.
         inputs: what the agent learns on: the encoder's ``"features"`` or its ``"readout"`` (pose and
             key probabilities, whose meaning survives a refit).
-        goal_positions: the agent also sees where its goal key lies on the calibrated layout, in the
-            coordinates of the pose the encoder learns.
+        goal_positions: the agent also sees where its goal key lies, in the coordinates of the pose
+            the encoder learns: on the calibrated layout (``labels="robot"``), or where the run
+            itself pressed that key (``labels="observation"``: the layout learnt from touch).
         pose_inputs: the agent (actor and critics) also sees the arm's pose at each tap, in the same
             coordinates: the environment is made with ``proprio=True`` and its observations carry
             ``sensor_pose``.
@@ -307,6 +315,7 @@ class TouchConfig:
     """
 
     enabled: bool = False
+    labels: TouchLabels = "robot"
     epochs: int = 40
     inputs: TouchInputs = "features"
     goal_positions: bool = False
@@ -453,6 +462,12 @@ class TrainConfig:
                 raise ValueError(
                     f"{name} learns from a touch encoder's labelled frames: set touch.enabled too"
                 )
+        for name in ("agent.critic_pose", "touch.pose_inputs"):
+            if needs_encoder[name] and touch.labels != "robot":
+                raise ValueError(
+                    f"{name} needs the arm's pose of every frame, which touch.labels='observation' "
+                    "does not record: set touch.labels='robot'"
+                )
         if touch.enabled and self.start_steps < 10:
             raise ValueError(
                 f"a touch encoder learns from the start steps: need at least 10, got {self.start_steps}"
@@ -489,10 +504,12 @@ class TrainConfig:
 def proprio_settings(config: TrainConfig) -> dict[str, str]:
     """The settings of ``config`` that use what only a calibrated robot knows (the ``proprio`` track),
     each with what it uses."""
+    robot = config.touch.labels == "robot"
     uses = (
-        ("touch.enabled", config.touch.enabled,
+        ("touch.enabled", config.touch.enabled and robot,
          "labels every frame with the arm's pose and the keys the calibrated layout places there"),
-        ("touch.goal_positions", config.touch.goal_positions, "places the goal on the calibrated key layout"),
+        ("touch.goal_positions", config.touch.goal_positions and robot,
+         "places the goal on the calibrated key layout"),
         ("touch.pose_inputs", config.touch.pose_inputs, "shows the agent the arm's pose"),
         ("agent.critic_pose", getattr(config.agent, "critic_pose", False),
          "shows the critics the arm's pose"),

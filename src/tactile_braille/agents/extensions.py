@@ -14,15 +14,19 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.config import TrainConfig
+from tactile_braille.envs.core import action_effects
 from tactile_braille.supervised.touch import (
     KeyLocator,
     LabelledTaps,
     TouchEncoderConfig,
+    Transitions,
     fit_touch_encoder,
+    fit_touch_odometry,
     observation_label,
 )
 
@@ -39,8 +43,13 @@ class RunExtension:
 
 
 class TouchEncoderFits(RunExtension):
-    """Label every frame with the sensor pose, the pressed key and the key under the sensor, and fit
-    the touch encoder on every labelled frame so far at :func:`touch_fit_steps`.
+    """Fit the touch encoder on every tap so far at :func:`touch_fit_steps`.
+
+    With ``touch.labels="robot"`` every frame is labelled with the sensor pose, the pressed key and the
+    key under the sensor (what a calibrated robot knows) and the encoder is fitted to predict them.
+    With ``touch.labels="observation"`` nothing outside the observations is recorded: the encoder is
+    fitted by touch odometry on the replay's steps (their previous actions and achieved goals,
+    :func:`~tactile_braille.supervised.touch.fit_touch_odometry`).
 
     The first fit starts from fresh weights, each refit from the current ones with as many gradient
     steps as the first (so its cost stays flat as taps accumulate). Each fit replaces the features in
@@ -57,14 +66,17 @@ class TouchEncoderFits(RunExtension):
 
     def __init__(self, config: TrainConfig, env, agent, buffer, run_dir: Path) -> None:
         self.config, self.agent, self.buffer, self.run_dir = config, agent, buffer, run_dir
+        self.robot = config.touch.labels == "robot"
+        self.continuous = isinstance(env.action_space, gym.spaces.Box)
         braille = hasattr(env.unwrapped, "layout")  # goal-conditioned toys have no keyboard
-        self.locate = KeyLocator(env.unwrapped.layout, env.unwrapped.goal_keys) if braille else None
+        locate = braille and self.robot
+        self.locate = KeyLocator(env.unwrapped.layout, env.unwrapped.goal_keys) if locate else None
         self.fit_steps = touch_fit_steps(config)
         if agent.fitted:
             buffer.set_encoder(agent.encode, agent.input_size)
 
-    def label(self, observation: dict[str, np.ndarray], info: dict) -> np.ndarray:
-        return observation_label(observation, info, self.locate)
+    def label(self, observation: dict[str, np.ndarray], info: dict) -> np.ndarray | None:
+        return observation_label(observation, info, self.locate) if self.robot else None
 
     def after_step(self, env_steps: int) -> None:
         if env_steps in self.fit_steps:
@@ -72,12 +84,19 @@ class TouchEncoderFits(RunExtension):
 
     def fit(self, env_steps: int) -> None:
         """Fit (or refit, from the current weights) the encoder on every labelled frame so far."""
-        taps = LabelledTaps.from_arrays(*self.buffer.labelled_frames())
+        if self.robot:
+            taps = LabelledTaps.from_arrays(*self.buffer.labelled_frames())
+            fit, count = fit_touch_encoder, len(taps)
+        else:
+            images, pairs, previous, pressed = self.buffer.frame_pairs()
+            effects = action_effects(previous, self.continuous)
+            taps = Transitions(images, pairs, effects, pressed)
+            fit, count = fit_touch_odometry, len(pairs)
         first = not self.agent.fitted
         epochs = self.config.touch.epochs
         if not first:
-            epochs = max(1, round(epochs * self.fit_steps[0] / len(taps)))
-        encoder, metrics = fit_touch_encoder(
+            epochs = max(1, round(epochs * self.fit_steps[0] / count))
+        encoder, metrics = fit(
             taps, self.buffer.goal_size, TouchEncoderConfig(epochs=epochs), self.config.seed + env_steps,
             self.agent.device, init=None if first else self.agent.touch,
         )  # fmt: skip

@@ -38,10 +38,10 @@ from typing import Any
 from tactile_braille.agents.config import AGENT_CONFIGS, TrainConfig, differences, replace_settings
 from tactile_braille.envs.registry import task_of
 
-PRESETS = ("paper", "released", "fast")
-PRESET_TRACKS = {"paper": "tactile", "released": "tactile", "fast": "proprio"}
-"""The track each preset competes in (docs/benchmark.md): the paper's agents learn from touch alone;
-``fast`` also from the arm's pose and the calibrated key layout."""
+PRESETS = ("paper", "released", "fast", "fast-tactile")
+PRESET_TRACKS = {"paper": "tactile", "released": "tactile", "fast": "proprio", "fast-tactile": "tactile"}
+"""The track each preset competes in (docs/benchmark.md): the paper's agents and ``fast-tactile`` learn
+from touch alone; ``fast`` also from the arm's pose and the calibrated key layout."""
 
 PAPER_EPOCHS = {
     ("discrete", "arrows"): 25,
@@ -59,6 +59,15 @@ FAST_EPOCHS = {
 }
 """Epochs of the ``fast`` preset: a third of the paper's convergence epochs or less, and the
 90-epoch budget for the continuous alphabet."""
+
+FAST_TACTILE_EPOCHS = {
+    ("discrete", "arrows"): 8,
+    ("discrete", "alphabet"): 25,
+    ("continuous", "arrows"): 30,
+    ("continuous", "alphabet"): 290,
+}
+"""Epochs of the ``fast-tactile`` preset: ``fast``'s, and on the continuous alphabet a third of the
+paper's 872 convergence epochs (issue 21's target)."""
 
 RELEASED_CHANGES: dict[str, dict[str, Any]] = {
     # The target moves 99.5 % of the way to the online network once per epoch (its `polyak: 0.005` is
@@ -132,6 +141,20 @@ def fast_changes(task: str, algo: str) -> dict[str, Any]:
     return changes
 
 
+def fast_tactile_changes(task: str, algo: str) -> dict[str, Any]:
+    """What ``fast-tactile`` changes on top of the paper's settings: ``fast`` on the ``tactile`` track.
+
+    Its touch encoder learns from the observations alone (touch odometry and the pressed keys,
+    ``touch.labels="observation"``), the goal is placed where the run itself pressed that key, and
+    neither the agent nor its critics see the arm's pose.
+    """
+    changes = fast_changes(task, algo)
+    changes["epochs"] = FAST_TACTILE_EPOCHS[family(task)]
+    changes["touch"].update(labels="observation", pose_inputs=False)
+    changes["agent"].pop("critic_pose", None)
+    return changes
+
+
 def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainConfig:
     """A :class:`~tactile_braille.agents.config.TrainConfig` from a preset, with overrides on top.
 
@@ -143,7 +166,7 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
     if algo not in AGENT_CONFIGS:
         raise ValueError(f"unknown algorithm {algo!r}; choose one of {tuple(AGENT_CONFIGS)}")
     changes = paper_changes(task, algo)
-    if name == "fast":  # fast keeps the noise it was made with, in the actions' [-1, 1] units
+    if name.startswith("fast"):  # fast keeps the noise it was made with, in the actions' [-1, 1] units
         changes.pop("agent", None)
     config = replace_settings(
         TrainConfig(task=task, algo=algo, preset=name, track=PRESET_TRACKS[name]), changes
@@ -152,6 +175,8 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
         config = replace_settings(config, RELEASED_CHANGES[algo])
     if name == "fast":
         config = replace_settings(config, fast_changes(task, algo))
+    if name == "fast-tactile":
+        config = replace_settings(config, fast_tactile_changes(task, algo))
     return replace_settings(config, overrides)
 
 

@@ -547,6 +547,31 @@ class EpisodeReplayBuffer:
         """Images (N, 1, H, W), poses (N, 3), pressed and under-sensor keys (N,) of labelled frames."""
         return self.store.labelled()
 
+    def frame_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The steps so far (the episode in progress too) as consecutive frames, from what their
+        observations carry alone.
+
+        Returns the frames (N, 1, H, W) the steps use, each once; the steps' (this, next) indices
+        into them (M, 2); the next frame's previous action (M, previous_action_size), i.e. the action
+        as the environment applied it; and the key its achieved goal names (M,; -1 none). With the
+        paper's relabelling, a relabelled copy of a step appears again.
+        """
+        if not self.images:
+            raise ValueError("this buffer holds features, not images")
+        going = self._episode
+        ongoing = np.array([step.frames for step in going], dtype=np.int64).reshape(-1, 2)
+        unique, pairs = np.unique(
+            np.concatenate([self.frame_index[: self.size], ongoing]), return_inverse=True
+        )
+        previous = [self.previous_actions[: self.size, 1], *(step.previous[1][None] for step in going)]
+        achieved = [self.achieved[: self.size], [_goal_index(step.achieved) for step in going]]
+        return (
+            self.store.observations(unique),
+            pairs.reshape(-1, 2),
+            np.concatenate(previous).astype(np.float32),
+            np.concatenate(achieved).astype(np.int64),
+        )
+
     # ------------------------------------------------------ checkpoints
     _TRANSITIONS = (
         "frame_index", "previous_actions", "goals", "actions", "rewards", "dones", "achieved", "finals",

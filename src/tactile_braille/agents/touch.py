@@ -56,6 +56,10 @@ class TouchAgent:
         pose_inputs: the agent also sees the arm's pose (the ``proprio`` observation's
             ``sensor_pose``; in the replay, each frame's labelled pose), standardised as the
             encoder's pose targets.
+        learnt_positions: the goal one-hot is followed by where the run pressed the goal key, in
+            the readout's coordinates (the ``key_map`` of an encoder fitted on observations alone,
+            :func:`~tactile_braille.supervised.touch.fit_touch_odometry`; a key never pressed yet
+            sits at the centre, 0).
     """
 
     def __init__(
@@ -65,9 +69,16 @@ class TouchAgent:
         key_positions_mm: np.ndarray | None = None,
         inputs: str = "features",
         pose_inputs: bool = False,
+        learnt_positions: bool = False,
     ) -> None:
         if inputs not in TOUCH_INPUTS:
             raise ValueError(f"inputs must be one of {TOUCH_INPUTS}, got {inputs!r}")
+        if learnt_positions and (key_positions_mm is not None or encoder.labels != "observation"):
+            raise ValueError(
+                "learnt_positions takes the key map of an encoder fitted on observations "
+                "(labels='observation'), and no calibrated key_positions_mm"
+            )
+        self.learnt_positions = bool(learnt_positions)
         self.agent, self.touch = agent, encoder.to(agent.device).eval().requires_grad_(False)
         self.device, self.config, self.precision = agent.device, agent.config, agent.precision
         self.fitted = False
@@ -88,9 +99,12 @@ class TouchAgent:
 
     def goals(self, goals: np.ndarray) -> np.ndarray:
         """Goal one-hots (..., keys), followed by the goal key's standardised position if known."""
-        if self.key_positions_mm is None:
+        if self.learnt_positions:
+            positions = np.nan_to_num(self.touch.key_map.cpu().numpy())
+        elif self.key_positions_mm is None:
             return goals
-        positions = self.touch.standardise(self.key_positions_mm)
+        else:
+            positions = self.touch.standardise(self.key_positions_mm)
         return np.concatenate([goals, (goals @ positions).astype(np.float32)], axis=-1)  # zeros: no goal
 
     def encode(self, images: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:

@@ -235,20 +235,23 @@ def make_agent(config: TrainConfig, env: gym.Env):
             env.observation_space, env.action_space, config.agent, config.device, config.precision
         )
     keys = env.observation_space["desired_goal"].shape[0]
-    encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden)
+    touch = config.touch
+    encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden, touch.labels)
     positions = None
-    if config.touch.goal_positions:
+    learnt = touch.goal_positions and touch.labels == "observation"  # the layout learnt from touch
+    if touch.goal_positions and not learnt:
         layout = env.unwrapped.layout
         positions = np.array([layout.centre_mm(key) for key in env.unwrapped.goal_keys])
-    size = touch_input_size(encoder, config.touch.inputs, config.touch.pose_inputs)
-    space = feature_space(env.observation_space, size, goal_positions=positions is not None)
+    size = touch_input_size(encoder, touch.inputs, touch.pose_inputs)
+    space = feature_space(env.observation_space, size, goal_positions=touch.goal_positions)
     agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
     return TouchAgent(
         agent,
         encoder,
         key_positions_mm=positions,
-        inputs=config.touch.inputs,
-        pose_inputs=config.touch.pose_inputs,
+        inputs=touch.inputs,
+        pose_inputs=touch.pose_inputs,
+        learnt_positions=learnt,
     )
 
 

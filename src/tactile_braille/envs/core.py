@@ -30,6 +30,27 @@ _MOVES = np.array([(-1, 0), (1, 0), (0, -1), (0, 1), (0, 0)], dtype=np.int64)
 _PRESS = DISCRETE_ACTIONS.index("PRESS")
 
 
+def action_effects(previous_actions: np.ndarray, continuous: bool) -> np.ndarray:
+    """What each action did, as the action space documents it, from the ``previous_action`` entries of
+    observations: (N, 3) float32, the planar move in action units, then the tap's depth code.
+
+    Continuous: the clipped normalised ``(dx, dy)`` and ``depth`` (before the workspace's edge clips the
+    move). Discrete: the grid move in (row, column) cells, and 1 for PRESS, 0 for a move's tap (before
+    the grid's edge stops a move). A reset's zero vector did nothing known: a row of NaN. Every track
+    may use this: it is the action space's documentation, not the sensor's pose or the key layout.
+    """
+    previous = np.asarray(previous_actions, dtype=np.float32)
+    effects = np.full((len(previous), 3), np.nan, dtype=np.float32)
+    acted = previous.any(-1)
+    if continuous:
+        effects[acted] = previous[acted, :3]
+    else:
+        action = previous[acted].argmax(-1)
+        effects[acted, :2] = _MOVES[action]
+        effects[acted, 2] = action == _PRESS
+    return effects
+
+
 def cell_positions_mm(task: Task, layout: KeyboardLayout) -> np.ndarray:
     """(rows, columns, 2) keyboard-frame position of each cell of the discrete key grid.
 

@@ -39,6 +39,11 @@ from torch.nn import functional as F
 from tactile_braille.supervised.fit import adam, fit_minibatches
 from tactile_braille.supervised.networks import IMAGE_SIZE_PX, Encoder
 
+TOUCH_LABELS = ("robot", "observation")
+"""What a touch encoder learns from: ``"robot"``, what a calibrated robot knows of every tap (the arm's
+pose, the key the layout places under the sensor, the key pressed); ``"observation"``, the observation
+dictionary alone (the previous action and the pressed key; :func:`fit_touch_odometry`)."""
+
 
 @dataclass(frozen=True)
 class TouchEncoderConfig:
@@ -79,8 +84,10 @@ class TouchEncoder(nn.Module):
     none or another key).
     """
 
-    def __init__(self, keys: int, features: int = 64, hidden: int = 256) -> None:
+    def __init__(self, keys: int, features: int = 64, hidden: int = 256, labels: str = "robot") -> None:
         super().__init__()
+        if labels not in TOUCH_LABELS:
+            raise ValueError(f"labels must be one of {TOUCH_LABELS}, got {labels!r}")
         self.encoder = Encoder()
         self.project = nn.Sequential(
             nn.Linear(Encoder.output_size, hidden),
@@ -90,7 +97,17 @@ class TouchEncoder(nn.Module):
         )
         self.pose = nn.Linear(features, 3)
         self.key = nn.Linear(features, keys + 1)
-        self.under = nn.Linear(features, keys + 1)
+        self.labels = labels
+        if labels == "robot":
+            self.under = nn.Linear(features, keys + 1)
+        else:
+            # What a step from here presses, given its action's effects (move, depth code): the key
+            # under the sensor is what a press without a move presses.
+            self.outcome = nn.Sequential(
+                nn.Linear(features + 3, hidden), nn.ReLU(), nn.Linear(hidden, keys + 1)
+            )
+            # Where each key was pressed, in the odometry's coordinates (NaN: never yet).
+            self.register_buffer("key_map", torch.full((keys, 2), float("nan")))
         self.register_buffer("pose_mean", torch.zeros(3))
         self.register_buffer("pose_scale", torch.ones(3))
         self.keys, self.features_size = keys, features
@@ -107,7 +124,15 @@ class TouchEncoder(nn.Module):
     def heads(self, images: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Pose predictions, pressed-key logits and under-the-sensor logits."""
         features = self.features(images)
-        return self.pose(features), self.key(features), self.under(features)
+        if self.labels == "robot":
+            return self.pose(features), self.key(features), self.under(features)
+        here = features.new_tensor(PRESS_HERE).expand(len(features), 3)
+        return self.pose(features), self.key(features), self.press_outcome(features, here)
+
+    def press_outcome(self, features: torch.Tensor, effects: torch.Tensor) -> torch.Tensor:
+        """Logits (B, keys + 1) of the key a step with these effects (B, 3) presses from frames of
+        these features (the last class: none); encoders fitted on observations only."""
+        return self.outcome(torch.cat([features, effects], -1))
 
     def standardise(self, poses_mm: np.ndarray) -> np.ndarray:
         """Poses in mm, (..., 3) or (..., 2) for x and y, in the pose head's standardised coordinates
@@ -118,8 +143,9 @@ class TouchEncoder(nn.Module):
 
     @property
     def readout_size(self) -> int:
-        """Length of :meth:`read`'s vectors: the pose and two key distributions."""
-        return 3 + 2 * (self.keys + 1)
+        """Length of :meth:`read`'s vectors: the pose and two key distributions (and, for an encoder
+        fitted on observations, where the key under the sensor lies on its key map)."""
+        return 3 + 2 * (self.keys + 1) + 2 * (self.labels == "observation")
 
     @torch.no_grad()
     def encode(self, images: np.ndarray) -> np.ndarray:
@@ -138,7 +164,10 @@ class TouchEncoder(nn.Module):
         refit to the next after the first 5,000 taps).
         """
         pose, pressed, under = self.heads(self._tensor(images))
-        return torch.cat([pose, pressed.softmax(-1), under.softmax(-1)], -1).float().cpu().numpy()
+        parts = [pose, pressed.softmax(-1), under.softmax(-1)]
+        if self.labels == "observation":  # the expected place of the key under the sensor
+            parts.append(under.softmax(-1)[:, : self.keys] @ self.key_map.nan_to_num())
+        return torch.cat(parts, -1).float().cpu().numpy()
 
     def _tensor(self, images: np.ndarray) -> torch.Tensor:
         images = np.asarray(images)
@@ -302,3 +331,197 @@ def fit_touch_encoder(
             (under_logits.argmax(-1).cpu() == under_labels[held].cpu()).float().mean()
         )
     return model, metrics
+
+
+@dataclass(frozen=True)
+class Transitions:
+    """Consecutive frames of a run's episodes, with what the observations say of each step.
+
+    Attributes:
+        images: (N, 1, H, W) uint8 frames.
+        pairs: (M, 2) indices into ``images``: a frame and the next one of its episode.
+        effects: (M, 3) float32: what the step's action did as the action space documents it (the
+            next frame's ``previous_action``; :func:`~tactile_braille.envs.core.action_effects`):
+            the planar move in action units, then the tap's depth code.
+        pressed: (M,) the key the next frame's achieved goal names (goal index, -1 none).
+    """
+
+    images: np.ndarray
+    pairs: np.ndarray
+    effects: np.ndarray
+    pressed: np.ndarray
+
+    def __post_init__(self) -> None:
+        if not (len(self.pairs) == len(self.effects) == len(self.pressed)):
+            raise ValueError("pairs, effects and pressed keys differ in number")
+        if self.pairs.ndim != 2 or self.pairs.shape[1] != 2 or self.effects.shape[1:] != (3,):
+            raise ValueError(f"pairs must be (M, 2) and effects (M, 3), got {self.pairs.shape}, "
+                             f"{self.effects.shape}")  # fmt: skip
+        if len(self.pairs) and (self.pairs.min() < 0 or self.pairs.max() >= len(self.images)):
+            raise ValueError(
+                f"pairs index {len(self.images)} frames, got {self.pairs.min()}..{self.pairs.max()}"
+            )
+
+
+PRESS_HERE = (0.0, 0.0, 1.0)
+"""The effects of a press where the sensor is (no move, full depth): the key an encoder fitted on
+observations reads under the sensor is the one its press outcome gives for it."""
+
+KEY_GRAPH_CONFIDENCE = 0.9
+"""How sure the key read under both frames of a step must be for :func:`key_graph` to use it."""
+
+NOTHING_PRESSED_WEIGHT = 0.1
+"""The weight, in the press-outcome loss, of a step that pressed nothing (a press weighs 1)."""
+
+ODOMETRY_BETA = 0.05
+"""Where touch odometry's loss turns from squared to absolute error, in action units: nearly an absolute
+error, whose fit is the median move from one touch to the next, which the steps that a workspace edge
+stopped (a minority) do not pull."""
+
+
+def fit_touch_odometry(
+    steps: Transitions,
+    keys: int,
+    config: TouchEncoderConfig | None = None,
+    seed: int = 0,
+    device: str | torch.device = "cpu",
+    init: TouchEncoder | None = None,
+) -> tuple[TouchEncoder, dict[str, float]]:
+    """Fit a touch encoder on what the observations carry: touch odometry and the pressed key.
+
+    No pose and no layout: the pose head learns coordinates in which every
+    step's move is its action's, ``pose(next)[:2] - pose(this)[:2] = move``
+    (a structured inverse dynamics: the previous action is in the
+    observation), and the tap's depth code; the key head learns the key the
+    achieved goal names. The coordinates are fixed up to a translation, which
+    is set by centring them on the frames; the head is then rescaled so that
+    :meth:`TouchEncoder.read` gives them standardised, and ``pose_mean`` and
+    ``pose_scale`` hold the action units (``standardise`` maps action units to
+    the readout). The encoder's ``key_map`` is where, in the readout's
+    coordinates, each key was pressed on average (NaN for keys never pressed):
+    the layout, learnt from the run's own presses.
+
+    A workspace's edge stops moves (the action space's documentation says
+    where a move goes, not where the edge is): the loss is nearly an absolute
+    error (:data:`ODOMETRY_BETA`), so these steps do not drag the fit. Returns the encoder (frozen, eval mode) and held-out
+    figures: ``touch/odometry_error`` (median planar error of a step, action
+    units), ``touch/key_accuracy`` (pressed key, "none" included),
+    ``touch/keys_located`` and ``touch/taps``.
+    """
+    config = config or TouchEncoderConfig()
+    if len(steps.pairs) < 10:
+        raise ValueError(f"touch odometry needs at least 10 steps, got {len(steps.pairs)}")
+    if steps.pressed.max() >= keys:
+        raise ValueError(f"a step pressed key {steps.pressed.max()}, but the task has {keys} keys")
+    generator = torch.Generator().manual_seed(seed)
+    known = np.flatnonzero(~np.isnan(steps.effects).any(-1))  # a reset's frame follows no action
+    order = known[np.random.default_rng(seed).permutation(len(known))]
+    held = order[: min(round(config.validation * len(order)), len(order) - 1)]
+    train = order[len(held) :]
+    device = torch.device(device)
+    model = TouchEncoder(keys, config.features, config.hidden, labels="observation").to(device)
+    if init is not None:
+        model.load_state_dict(init.state_dict())
+        model.requires_grad_(True)
+    images = torch.as_tensor(steps.images, device=device)
+    pairs = torch.as_tensor(steps.pairs, device=device)
+    effects = torch.as_tensor(steps.effects, dtype=torch.float32, device=device)
+    labels = torch.as_tensor(np.where(steps.pressed < 0, keys, steps.pressed), device=device)
+    optimiser = adam(model.parameters(), config.learning_rate)
+    total = config.epochs * math.ceil(len(train) / config.batch_size)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, config.learning_rate, total_steps=total)
+    train_index = torch.as_tensor(train, device=device)
+
+    def units(pose: torch.Tensor) -> torch.Tensor:  # the head's readout in action units
+        return pose * model.pose_scale + model.pose_mean
+
+    def batch_loss(batch: torch.Tensor) -> torch.Tensor:
+        index = train_index[batch.to(device)]
+        both = pairs[index]
+        features = model.features(images[both.reshape(-1)]).reshape(len(index), 2, -1)
+        pose = units(model.pose(features))
+        effect = effects[index]
+        moved = pose[:, 1, :2] - pose[:, 0, :2]
+        move = F.smooth_l1_loss(moved, effect[:, :2], beta=ODOMETRY_BETA)
+        depth = F.smooth_l1_loss(pose[:, 1, 2], effect[:, 2], beta=ODOMETRY_BETA)
+        pressed = F.cross_entropy(model.key(features[:, 1]), labels[index])
+        # Most steps press nothing, which their depth alone tells: they weigh less.
+        weight = torch.where(labels[index] == keys, NOTHING_PRESSED_WEIGHT, 1.0)
+        outcome = F.cross_entropy(
+            model.press_outcome(features[:, 0], effect), labels[index], reduction="none"
+        )
+        outcome = (weight * outcome).sum() / weight.sum()
+        return move + depth + pressed + outcome
+
+    fit_minibatches(
+        model, len(train), batch_loss, optimiser, config.epochs, config.batch_size, generator, schedule
+    )
+    model.eval().requires_grad_(False)
+    with torch.no_grad():
+        frames = torch.unique(pairs)
+        poses = torch.cat([units(model(images[chunk])[0]) for chunk in frames.split(1024)])
+        _standardise_head(model, poses.mean(0), poses.std(0) + 1e-3)
+        under = torch.cat([model.heads(chunk)[2].softmax(-1) for chunk in images.split(1024)])
+    model.key_map.copy_(torch.as_tensor(key_graph(under.cpu().numpy(), steps.pairs, steps.effects[:, :2])))
+    located = int((~model.key_map.isnan().any(-1)).sum())
+    metrics = {"touch/taps": float(len(steps.images)), "touch/keys_located": float(located)}
+    if len(held):
+        with torch.no_grad():
+            both = pairs[torch.as_tensor(held, device=device)]
+            pose, logits = model(images[both.reshape(-1)])
+        pose = (units(pose).reshape(len(held), 2, 3)).cpu().numpy()
+        error = pose[:, 1, :2] - pose[:, 0, :2] - steps.effects[held, :2]
+        metrics["touch/odometry_error"] = float(np.median(np.linalg.norm(error, axis=-1)))
+        predicted = logits.reshape(len(held), 2, -1)[:, 1].argmax(-1).cpu()
+        metrics["touch/key_accuracy"] = float((predicted == labels[held].cpu()).float().mean())
+        with torch.no_grad():
+            features = model.features(images[both[:, 0]])
+            outcome = model.press_outcome(features, effects[torch.as_tensor(held, device=device)]).argmax(-1)
+        pressing = labels[held] < keys
+        if pressing.any():  # how often the key a press pressed was foreseen from the frame before it
+            metrics["touch/outcome_accuracy"] = float((outcome == labels[held])[pressing].float().mean())
+    return model, metrics
+
+
+def _standardise_head(model: TouchEncoder, mean: torch.Tensor, scale: torch.Tensor) -> None:
+    """Rescale the pose head so that it reads ``(units - mean) / scale`` (units unchanged), and keep
+    ``mean`` and ``scale`` as the encoder's ``pose_mean`` and ``pose_scale``."""
+    ratio = model.pose_scale / scale
+    model.pose.weight.mul_(ratio[:, None])
+    model.pose.bias.copy_(model.pose.bias * ratio + (model.pose_mean - mean) / scale)
+    model.pose_mean.copy_(mean)
+    model.pose_scale.copy_(scale)
+
+
+def key_graph(
+    under: np.ndarray, pairs: np.ndarray, moves: np.ndarray, confidence: float = KEY_GRAPH_CONFIDENCE
+) -> np.ndarray:
+    """Where the keys lie relative to each other, from steps between them: (keys, 2) in action units,
+    centred, NaN for a key no such step reached.
+
+    ``under`` (N, keys + 1) are the frames' key distributions (the last class: none), ``pairs`` (M, 2)
+    the steps' frames and ``moves`` (M, 2) their actions' moves. Each step from one key to another,
+    both read with at least ``confidence``, says ``place[next] - place[this] = move``; the places are
+    the least-squares solution (a graph of keys, the layout as touch and the actions tell it). On the
+    discrete tasks the moves between cells are exact; on the continuous ones each also carries the
+    taps' offsets on their keys, which the many steps average out.
+    """
+    keys = under.shape[1] - 1
+    read, sure = under.argmax(-1), under.max(-1) >= confidence
+    this, following = read[pairs[:, 0]], read[pairs[:, 1]]
+    use = sure[pairs[:, 0]] & sure[pairs[:, 1]] & (this < keys) & (following < keys) & (this != following)
+    use &= np.isfinite(moves).all(-1) & np.any(moves != 0, axis=-1)  # a press stays: its reads tell nothing
+    places = np.full((keys, 2), np.nan, dtype=np.float32)
+    linked = np.unique(np.concatenate([this[use], following[use]]))
+    if not len(linked):
+        return places
+    column = np.full(keys, -1)
+    column[linked] = np.arange(len(linked))
+    rows = np.count_nonzero(use)
+    system = np.zeros((rows + 1, len(linked)))
+    system[np.arange(rows), column[following[use]]] += 1.0
+    system[np.arange(rows), column[this[use]]] -= 1.0
+    system[rows] = 1.0  # the gauge: centred
+    targets = np.concatenate([moves[use], np.zeros((1, 2))])
+    places[linked] = np.linalg.lstsq(system, targets, rcond=None)[0]
+    return places
