@@ -158,7 +158,7 @@ def test_a_touch_agent_with_pose_inputs_appends_the_standardised_pose_of_each_fr
     np.testing.assert_allclose(features["observation"], vectors[0], atol=1e-6)
 
 
-# ---------------------------------------------------------------- goals placed on the layout learnt from touch
+# ---------------------------------------------------------------- goals on the layout learnt from touch
 def test_learnt_goal_positions_come_from_the_encoders_key_map_and_travel_with_its_snapshots(discrete_env):
     torch.manual_seed(0)
     encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8, labels="observation")

@@ -55,7 +55,7 @@ def test_a_tactile_run_using_pose_or_layout_is_refused_with_what_it_used(changes
 def test_an_encoder_fitted_on_observations_has_no_pose_to_show(changes):
     config = preset_config("fast-tactile", "tactile_braille/ContinuousAlphabet-v0", "sac", track="proprio")
     assert config.touch.labels == "observation" and not proprio_settings(config)
-    with pytest.raises(ValueError, match="which touch.labels='observation' does not record"):
+    with pytest.raises(ValueError, match=r"which touch\.labels='observation' does not record"):
         config.with_changes(**changes)
 
 

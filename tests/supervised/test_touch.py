@@ -246,7 +246,8 @@ def test_touch_odometry_learns_where_each_tap_is_up_to_a_translation_and_where_e
     steps, cells = synthetic_steps(300, 0)
     model, metrics = fit_touch_odometry(steps, SYNTHETIC_KEYS, config, seed=0)
     assert set(metrics) == {
-        "touch/taps", "touch/keys_located", "touch/odometry_error", "touch/key_accuracy", "touch/outcome_accuracy"
+        "touch/taps", "touch/keys_located", "touch/odometry_error", "touch/key_accuracy",
+        "touch/outcome_accuracy",
     }  # fmt: skip
     assert metrics["touch/taps"] == 301
     assert metrics["touch/keys_located"] == np.isfinite(model.key_map.numpy()).all(-1).sum()

@@ -387,26 +387,34 @@ def fit_touch_odometry(
     device: str | torch.device = "cpu",
     init: TouchEncoder | None = None,
 ) -> tuple[TouchEncoder, dict[str, float]]:
-    """Fit a touch encoder on what the observations carry: touch odometry and the pressed key.
+    """Fit a touch encoder on what the observations carry: its previous actions and achieved goals.
 
-    No pose and no layout: the pose head learns coordinates in which every
-    step's move is its action's, ``pose(next)[:2] - pose(this)[:2] = move``
-    (a structured inverse dynamics: the previous action is in the
-    observation), and the tap's depth code; the key head learns the key the
-    achieved goal names. The coordinates are fixed up to a translation, which
-    is set by centring them on the frames; the head is then rescaled so that
-    :meth:`TouchEncoder.read` gives them standardised, and ``pose_mean`` and
-    ``pose_scale`` hold the action units (``standardise`` maps action units to
-    the readout). The encoder's ``key_map`` is where, in the readout's
-    coordinates, each key was pressed on average (NaN for keys never pressed):
-    the layout, learnt from the run's own presses.
+    No pose and no layout. Three objectives share the encoder's features:
 
-    A workspace's edge stops moves (the action space's documentation says
-    where a move goes, not where the edge is): the loss is nearly an absolute
-    error (:data:`ODOMETRY_BETA`), so these steps do not drag the fit. Returns the encoder (frozen, eval mode) and held-out
-    figures: ``touch/odometry_error`` (median planar error of a step, action
-    units), ``touch/key_accuracy`` (pressed key, "none" included),
-    ``touch/keys_located`` and ``touch/taps``.
+    * touch odometry: the pose head learns coordinates in which every step's
+      move is its action's, ``pose(next)[:2] - pose(this)[:2] = move`` (a
+      structured inverse dynamics; the previous action is in the
+      observation), and the tap's depth code. The coordinates are fixed up to
+      a translation, set by centring them on the frames; the head is rescaled
+      so that :meth:`TouchEncoder.read` gives them standardised, and
+      ``pose_mean`` and ``pose_scale`` hold the action units. A workspace's
+      edge stops moves (the action space's documentation says where a move
+      goes, not where the edge is): the loss is nearly an absolute error
+      (:data:`ODOMETRY_BETA`), so these steps do not drag the fit;
+    * the pressed key, from the frame a press gave;
+    * the press outcome: the key a step presses, from the frame before it and
+      the step's effects (:meth:`TouchEncoder.press_outcome`; steps that press
+      nothing weigh :data:`NOTHING_PRESSED_WEIGHT`). Its answer for a press
+      without a move (:data:`PRESS_HERE`) is the key under the sensor.
+
+    The encoder's ``key_map`` is then the :func:`key_graph` of the keys read
+    under the frames: the layout, as touch and the actions tell it.
+
+    Returns the encoder (frozen, eval mode) and held-out figures:
+    ``touch/odometry_error`` (median planar error of a step, action units),
+    ``touch/key_accuracy`` (pressed key, "none" included),
+    ``touch/outcome_accuracy`` (the key each held-out press pressed, foreseen
+    from the frame before it), ``touch/keys_located`` and ``touch/taps``.
     """
     config = config or TouchEncoderConfig()
     if len(steps.pairs) < 10:
