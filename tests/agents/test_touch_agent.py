@@ -13,7 +13,7 @@ from agents_helpers import same_weights, through_file
 from feature_agents import ACTION_SPACE, FEATURES, GOALS, PREVIOUS, batch, feature_observation_space, make
 from tactile_braille.agents import DQNAgent, DQNConfig, SACAgent, SACConfig
 from tactile_braille.agents.common import observation_features
-from tactile_braille.agents.touch import TouchAgent, feature_space
+from tactile_braille.agents.touch import TouchAgent, feature_space, touch_input_size
 from tactile_braille.supervised.touch import TouchEncoder
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -159,36 +159,34 @@ def test_a_touch_agent_with_pose_inputs_appends_the_standardised_pose_of_each_fr
 
 
 # ---------------------------------------------------------------- goals on the layout learnt from touch
-def test_learnt_goal_positions_come_from_the_encoders_key_map_and_travel_with_its_snapshots(discrete_env):
+def test_goal_offsets_show_the_learner_only_its_goals_offset_from_the_sensor(discrete_env):
     torch.manual_seed(0)
     encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8, labels="observation")
-    space = feature_space(discrete_env.observation_space, encoder.readout_size, goal_positions=True)
+    size = touch_input_size(encoder, "readout", goal_offsets=True)
+    assert size == encoder.readout_size - 2 * GOALS + 2 and encoder.readout_size == 3 + 4 * GOALS + 2
+    space = feature_space(discrete_env.observation_space, size)
     agent = TouchAgent(DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,))), encoder,
-                       inputs="readout", learnt_positions=True)  # fmt: skip
-    goals = np.eye(GOALS, dtype=np.float32)
-    np.testing.assert_array_equal(agent.goals(goals)[:, GOALS:], 0.0)  # no key located yet: the centre
-    places = np.arange(2 * GOALS, dtype=np.float32).reshape(GOALS, 2)
-    places[1] = np.nan  # never reached
-    agent.touch.key_map.copy_(torch.as_tensor(places))
-    placed = agent.goals(goals)
-    np.testing.assert_array_equal(placed[:, :GOALS], goals)
-    np.testing.assert_array_equal(placed[:, GOALS:], np.nan_to_num(places))
-    np.testing.assert_array_equal(agent.goals(np.zeros((1, GOALS), np.float32))[:, GOALS:], 0.0)  # no goal
-    # The readout ends with where the key read under the sensor lies on that map.
+                       inputs="readout", goal_offsets=True)  # fmt: skip
+    assert agent.input_size == encoder.readout_size  # the replay caches the whole readout
     observation, _ = discrete_env.reset(seed=0)
     readout = agent.touch.read(observation["observation"][None])[0]
-    under = readout[3 + GOALS + 1 : 3 + 2 * (GOALS + 1)]
-    np.testing.assert_allclose(readout[-2:], under[:GOALS] @ np.nan_to_num(places), rtol=1e-5)
-    other = TouchAgent(DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,))),
-                       TouchEncoder(GOALS, features=FEATURES, hidden=8, labels="observation"),
-                       inputs="readout", learnt_positions=True)  # fmt: skip
-    other.load_policy_state_dict(through_file(agent.policy_state_dict()))
-    np.testing.assert_array_equal(other.goals(goals), placed)
+    goal = int(observation["desired_goal"].argmax())
+    seen = agent.features(observation)["observation"]
+    np.testing.assert_allclose(seen[:-2], readout[: -2 * GOALS], rtol=1e-6)
+    np.testing.assert_allclose(seen[-2:], readout[-2 * GOALS :].reshape(GOALS, 2)[goal], rtol=1e-6)
+    # In updates, each transition's (relabelled) goal picks its offset, in both frames.
+    vectors = np.random.default_rng(0).normal(size=(3, encoder.readout_size)).astype(np.float32)
+    goals = np.eye(GOALS, dtype=np.float32)[[2, 0, 3]]
+    viewed = agent.view(vectors, goals)
+    np.testing.assert_array_equal(viewed[1, -2:], vectors[1, -2 * GOALS : -2 * GOALS + 2])
+    np.testing.assert_array_equal(agent.view(vectors, np.zeros_like(goals))[:, -2:], 0.0)  # no goal
+    assert viewed.shape == (3, size)
 
 
-def test_learnt_goal_positions_need_an_encoder_fitted_on_observations(discrete_env):
-    encoder = TouchEncoder(GOALS, features=FEATURES, hidden=8)  # the robot's labels
-    space = feature_space(discrete_env.observation_space, encoder.readout_size, goal_positions=True)
-    learner = DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,)))
-    with pytest.raises(ValueError, match="learnt_positions takes the key map of an encoder fitted on obs"):
-        TouchAgent(learner, encoder, inputs="readout", learnt_positions=True)
+def test_goal_offsets_need_an_encoder_fitted_on_observations_and_its_readout(discrete_env):
+    for encoder, inputs in ((TouchEncoder(GOALS, features=FEATURES, hidden=8), "readout"),
+                            (TouchEncoder(GOALS, features=FEATURES, hidden=8, labels="observation"), "features")):  # fmt: skip
+        space = feature_space(discrete_env.observation_space, 8)
+        learner = DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,)))
+        with pytest.raises(ValueError, match="goal_offsets"):
+            TouchAgent(learner, encoder, inputs=inputs, goal_offsets=True)

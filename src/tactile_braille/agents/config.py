@@ -462,6 +462,11 @@ class TrainConfig:
                 raise ValueError(
                     f"{name} learns from a touch encoder's labelled frames: set touch.enabled too"
                 )
+        if touch.goal_positions and touch.labels == "observation" and touch.inputs != "readout":
+            raise ValueError(
+                "touch.goal_positions with touch.labels='observation' reads the goal's offset off the "
+                "encoder's readout: set touch.inputs='readout'"
+            )
         for name in ("agent.critic_pose", "touch.pose_inputs"):
             if needs_encoder[name] and touch.labels != "robot":
                 raise ValueError(

@@ -56,10 +56,10 @@ class TouchAgent:
         pose_inputs: the agent also sees the arm's pose (the ``proprio`` observation's
             ``sensor_pose``; in the replay, each frame's labelled pose), standardised as the
             encoder's pose targets.
-        learnt_positions: the goal one-hot is followed by where the run pressed the goal key, in
-            the readout's coordinates (the ``key_map`` of an encoder fitted on observations alone,
-            :func:`~tactile_braille.supervised.touch.fit_touch_odometry`; a key never pressed yet
-            sits at the centre, 0).
+        goal_offsets: the learner sees, instead of every key's offset from the sensor that the
+            readout of an encoder fitted on observations ends with
+            (:func:`~tactile_braille.supervised.touch.fit_touch_odometry`), the goal key's: where
+            the goal lies from what the sensor feels, learnt in hindsight from the run's presses.
     """
 
     def __init__(
@@ -69,16 +69,18 @@ class TouchAgent:
         key_positions_mm: np.ndarray | None = None,
         inputs: str = "features",
         pose_inputs: bool = False,
-        learnt_positions: bool = False,
+        goal_offsets: bool = False,
     ) -> None:
         if inputs not in TOUCH_INPUTS:
             raise ValueError(f"inputs must be one of {TOUCH_INPUTS}, got {inputs!r}")
-        if learnt_positions and (key_positions_mm is not None or encoder.labels != "observation"):
+        if goal_offsets and (key_positions_mm is not None or encoder.labels != "observation"):
             raise ValueError(
-                "learnt_positions takes the key map of an encoder fitted on observations "
+                "goal_offsets takes the key offsets of an encoder fitted on observations "
                 "(labels='observation'), and no calibrated key_positions_mm"
             )
-        self.learnt_positions = bool(learnt_positions)
+        if goal_offsets and inputs != "readout":
+            raise ValueError("goal_offsets reads the key offsets off the encoder's readout: inputs='readout'")
+        self.goal_offsets = bool(goal_offsets)
         self.agent, self.touch = agent, encoder.to(agent.device).eval().requires_grad_(False)
         self.device, self.config, self.precision = agent.device, agent.config, agent.precision
         self.fitted = False
@@ -99,12 +101,9 @@ class TouchAgent:
 
     def goals(self, goals: np.ndarray) -> np.ndarray:
         """Goal one-hots (..., keys), followed by the goal key's standardised position if known."""
-        if self.learnt_positions:
-            positions = np.nan_to_num(self.touch.key_map.cpu().numpy())
-        elif self.key_positions_mm is None:
+        if self.key_positions_mm is None:
             return goals
-        else:
-            positions = self.touch.standardise(self.key_positions_mm)
+        positions = self.touch.standardise(self.key_positions_mm)
         return np.concatenate([goals, (goals @ positions).astype(np.float32)], axis=-1)  # zeros: no goal
 
     def encode(self, images: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
@@ -118,6 +117,17 @@ class TouchAgent:
             raise ValueError("an agent with pose inputs needs the arm's pose of every frame it encodes")
         return np.concatenate([vectors, self.touch.standardise(poses)], axis=-1)
 
+    def view(self, vectors: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """What the learner sees of :meth:`encode`'s vectors (B, n) for these goal one-hots (B, keys):
+        the vectors themselves, or with ``goal_offsets`` the readout with only the goal key's offset
+        (zeros for no goal)."""
+        if not self.goal_offsets:
+            return vectors
+        keys = self.touch.keys
+        offsets = vectors[:, -2 * keys :].reshape(len(vectors), keys, 2)
+        aimed = np.einsum("bk,bkd->bd", np.asarray(goals, dtype=np.float32)[:, :keys], offsets)
+        return np.concatenate([vectors[:, : -2 * keys], aimed], axis=-1).astype(np.float32)
+
     def features(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The observation with its image replaced by :meth:`encode`'s vector (and its goal placed)."""
         poses = None
@@ -128,10 +138,11 @@ class TouchAgent:
                     f"{PROPRIO_KEY!r}: make its environment with proprio=True (the proprio track)"
                 )
             poses = np.asarray(observation[PROPRIO_KEY], dtype=np.float32)[None]
+        goal = np.asarray(observation["desired_goal"], dtype=np.float32)
         return {
             **{name: value for name, value in observation.items() if name != PROPRIO_KEY},
-            "observation": self.encode(observation["observation"][None], poses)[0],
-            "desired_goal": self.goals(np.asarray(observation["desired_goal"], dtype=np.float32)),
+            "observation": self.view(self.encode(observation["observation"][None], poses), goal[None])[0],
+            "desired_goal": self.goals(goal),
         }
 
     def policy_action(self, observation: dict, *args, **kwargs):
@@ -139,7 +150,8 @@ class TouchAgent:
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """An update of the wrapped agent; poses in the batch are standardised as the encoder's targets."""
-        batch = {**batch, "goals": self.goals(batch["goals"])}
+        views = {name: self.view(batch[name], batch["goals"]) for name in ("images", "next_images")}
+        batch = {**batch, **views, "goals": self.goals(batch["goals"])}
         if "poses" in batch:
             batch["poses"] = self.touch.standardise(batch["poses"])
             batch["next_poses"] = self.touch.standardise(batch["next_poses"])
@@ -173,10 +185,13 @@ class TouchAgent:
         self.touch.load_state_dict(state["touch"])
 
 
-def touch_input_size(encoder: TouchEncoder, inputs: str, pose_inputs: bool = False) -> int:
-    """Length of the vectors a :class:`TouchAgent` with these ``inputs`` (and pose inputs) learns on."""
+def touch_input_size(
+    encoder: TouchEncoder, inputs: str, pose_inputs: bool = False, goal_offsets: bool = False
+) -> int:
+    """Length of the vectors a :class:`TouchAgent` with these ``inputs`` (and pose inputs) encodes, or
+    with ``goal_offsets`` those it learns on (:meth:`TouchAgent.view`)."""
     size = encoder.features_size if inputs == "features" else encoder.readout_size
-    return size + 3 * bool(pose_inputs)
+    return size + 3 * bool(pose_inputs) - (2 * encoder.keys - 2) * bool(goal_offsets)
 
 
 def feature_space(

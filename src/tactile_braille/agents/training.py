@@ -238,12 +238,12 @@ def make_agent(config: TrainConfig, env: gym.Env):
     touch = config.touch
     encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden, touch.labels)
     positions = None
-    learnt = touch.goal_positions and touch.labels == "observation"  # the layout learnt from touch
+    learnt = touch.goal_positions and touch.labels == "observation"  # where the goal lies, from touch
     if touch.goal_positions and not learnt:
         layout = env.unwrapped.layout
         positions = np.array([layout.centre_mm(key) for key in env.unwrapped.goal_keys])
-    size = touch_input_size(encoder, touch.inputs, touch.pose_inputs)
-    space = feature_space(env.observation_space, size, goal_positions=touch.goal_positions)
+    size = touch_input_size(encoder, touch.inputs, touch.pose_inputs, goal_offsets=learnt)
+    space = feature_space(env.observation_space, size, goal_positions=positions is not None)
     agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
     return TouchAgent(
         agent,
@@ -251,7 +251,7 @@ def make_agent(config: TrainConfig, env: gym.Env):
         key_positions_mm=positions,
         inputs=touch.inputs,
         pose_inputs=touch.pose_inputs,
-        learnt_positions=learnt,
+        goal_offsets=learnt,
     )
 
 

@@ -106,8 +106,8 @@ class TouchEncoder(nn.Module):
             self.outcome = nn.Sequential(
                 nn.Linear(features + 3, hidden), nn.ReLU(), nn.Linear(hidden, keys + 1)
             )
-            # Where each key was pressed, in the odometry's coordinates (NaN: never yet).
-            self.register_buffer("key_map", torch.full((keys, 2), float("nan")))
+            # Where each key lies from here, in action units: the moves that led to pressing it.
+            self.offsets = nn.Linear(features, 2 * keys)
         self.register_buffer("pose_mean", torch.zeros(3))
         self.register_buffer("pose_scale", torch.ones(3))
         self.keys, self.features_size = keys, features
@@ -144,8 +144,8 @@ class TouchEncoder(nn.Module):
     @property
     def readout_size(self) -> int:
         """Length of :meth:`read`'s vectors: the pose and two key distributions (and, for an encoder
-        fitted on observations, where the key under the sensor lies on its key map)."""
-        return 3 + 2 * (self.keys + 1) + 2 * (self.labels == "observation")
+        fitted on observations, each key's offset from the sensor)."""
+        return 3 + 2 * (self.keys + 1) + 2 * self.keys * (self.labels == "observation")
 
     @torch.no_grad()
     def encode(self, images: np.ndarray) -> np.ndarray:
@@ -163,10 +163,11 @@ class TouchEncoder(nn.Module):
         taps accumulate (in a continuous-alphabet run, it moves by about 1-1.5 % of the spread from one
         refit to the next after the first 5,000 taps).
         """
-        pose, pressed, under = self.heads(self._tensor(images))
+        tensor = self._tensor(images)
+        pose, pressed, under = self.heads(tensor)
         parts = [pose, pressed.softmax(-1), under.softmax(-1)]
-        if self.labels == "observation":  # the expected place of the key under the sensor
-            parts.append(under.softmax(-1)[:, : self.keys] @ self.key_map.nan_to_num())
+        if self.labels == "observation":  # each key's offset from the sensor, (x, y) per key
+            parts.append(self.offsets(self.features(tensor)))
         return torch.cat(parts, -1).float().cpu().numpy()
 
     def _tensor(self, images: np.ndarray) -> torch.Tensor:
@@ -367,9 +368,6 @@ PRESS_HERE = (0.0, 0.0, 1.0)
 """The effects of a press where the sensor is (no move, full depth): the key an encoder fitted on
 observations reads under the sensor is the one its press outcome gives for it."""
 
-KEY_GRAPH_CONFIDENCE = 0.9
-"""How sure the key read under both frames of a step must be for :func:`key_graph` to use it."""
-
 NOTHING_PRESSED_WEIGHT = 0.1
 """The weight, in the press-outcome loss, of a step that pressed nothing (a press weighs 1)."""
 
@@ -407,14 +405,19 @@ def fit_touch_odometry(
       nothing weigh :data:`NOTHING_PRESSED_WEIGHT`). Its answer for a press
       without a move (:data:`PRESS_HERE`) is the key under the sensor.
 
-    The encoder's ``key_map`` is then the :func:`key_graph` of the keys read
-    under the frames: the layout, as touch and the actions tell it.
+    * hindsight offsets: from each frame of an episode that ended pressing a
+      key, where that key lay, the sum of the moves to the press
+      (:func:`hindsight_offsets`). The offsets head learns, for every key,
+      where it lies from what the sensor feels: the layout, as touch and the
+      actions tell it, relative to the sensor.
 
     Returns the encoder (frozen, eval mode) and held-out figures:
     ``touch/odometry_error`` (median planar error of a step, action units),
     ``touch/key_accuracy`` (pressed key, "none" included),
     ``touch/outcome_accuracy`` (the key each held-out press pressed, foreseen
-    from the frame before it), ``touch/keys_located`` and ``touch/taps``.
+    from the frame before it), ``touch/offset_error`` (median distance of a
+    held-out frame's offset to its episode's pressed key, action units),
+    ``touch/aimed_steps`` and ``touch/taps``.
     """
     config = config or TouchEncoderConfig()
     if len(steps.pairs) < 10:
@@ -435,6 +438,7 @@ def fit_touch_odometry(
     pairs = torch.as_tensor(steps.pairs, device=device)
     effects = torch.as_tensor(steps.effects, dtype=torch.float32, device=device)
     labels = torch.as_tensor(np.where(steps.pressed < 0, keys, steps.pressed), device=device)
+    aimed, offset = (torch.as_tensor(a, device=device) for a in hindsight_offsets(steps))
     optimiser = adam(model.parameters(), config.learning_rate)
     total = config.epochs * math.ceil(len(train) / config.batch_size)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, config.learning_rate, total_steps=total)
@@ -459,7 +463,12 @@ def fit_touch_odometry(
             model.press_outcome(features[:, 0], effect), labels[index], reduction="none"
         )
         outcome = (weight * outcome).sum() / weight.sum()
-        return move + depth + pressed + outcome
+        # Where the key this episode went on to press lies from this frame (hindsight offsets).
+        known = aimed[index] >= 0
+        predicted = model.offsets(features[known, 0]).reshape(-1, keys, 2)
+        predicted = predicted[torch.arange(len(predicted)), aimed[index][known]]
+        offsets = F.smooth_l1_loss(predicted, offset[index][known], beta=ODOMETRY_BETA, reduction="sum")
+        return move + depth + pressed + outcome + offsets / len(index)
 
     fit_minibatches(
         model, len(train), batch_loss, optimiser, config.epochs, config.batch_size, generator, schedule
@@ -469,10 +478,7 @@ def fit_touch_odometry(
         frames = torch.unique(pairs)
         poses = torch.cat([units(model(images[chunk])[0]) for chunk in frames.split(1024)])
         _standardise_head(model, poses.mean(0), poses.std(0) + 1e-3)
-        under = torch.cat([model.heads(chunk)[2].softmax(-1) for chunk in images.split(1024)])
-    model.key_map.copy_(torch.as_tensor(key_graph(under.cpu().numpy(), steps.pairs, steps.effects[:, :2])))
-    located = int((~model.key_map.isnan().any(-1)).sum())
-    metrics = {"touch/taps": float(len(steps.images)), "touch/keys_located": float(located)}
+    metrics = {"touch/taps": float(len(steps.images)), "touch/aimed_steps": float((aimed >= 0).sum())}
     if len(held):
         with torch.no_grad():
             both = pairs[torch.as_tensor(held, device=device)]
@@ -488,7 +494,40 @@ def fit_touch_odometry(
         pressing = labels[held] < keys
         if pressing.any():  # how often the key a press pressed was foreseen from the frame before it
             metrics["touch/outcome_accuracy"] = float((outcome == labels[held])[pressing].float().mean())
+        held_t = torch.as_tensor(held, device=device)
+        known = aimed[held_t] >= 0
+        if known.any():  # how far off the offset to the key an episode went on to press was
+            with torch.no_grad():
+                predicted = model.offsets(features[known]).reshape(-1, keys, 2)
+            predicted = predicted[torch.arange(len(predicted)), aimed[held_t][known]]
+            error = torch.linalg.norm(predicted - offset[held_t][known], dim=-1)
+            metrics["touch/offset_error"] = float(error.median())
     return model, metrics
+
+
+def hindsight_offsets(steps: Transitions) -> tuple[np.ndarray, np.ndarray]:
+    """For each step's first frame, the key its episode went on to press (M,; -1 none) and where that
+    key lay from the frame (M, 2): the sum of the moves from there to the press, in action units.
+
+    Episodes are read off the steps' frames (a step continues the one whose next frame is its first);
+    an edge that stopped a move makes its sum too long, which the fit's near-absolute loss tolerates.
+    """
+    count = len(steps.pairs)
+    aimed = np.full(count, -1, dtype=np.int64)
+    offsets = np.zeros((count, 2), dtype=np.float32)
+    moves = np.nan_to_num(steps.effects[:, :2])
+    continues = np.zeros(count, dtype=bool)  # step m continues step m - 1
+    continues[1:] = steps.pairs[1:, 0] == steps.pairs[:-1, 1]
+    key, total = -1, np.zeros(2, dtype=np.float32)
+    for m in range(count - 1, -1, -1):
+        if steps.pressed[m] >= 0:  # an episode's last step: it pressed a key
+            key, total = int(steps.pressed[m]), np.zeros(2, dtype=np.float32)
+        if key >= 0:
+            total = total + moves[m]
+            aimed[m], offsets[m] = key, total
+        if not continues[m]:  # the episode starts here: the step before belongs to another
+            key = -1
+    return aimed, offsets
 
 
 def _standardise_head(model: TouchEncoder, mean: torch.Tensor, scale: torch.Tensor) -> None:
@@ -499,37 +538,3 @@ def _standardise_head(model: TouchEncoder, mean: torch.Tensor, scale: torch.Tens
     model.pose.bias.copy_(model.pose.bias * ratio + (model.pose_mean - mean) / scale)
     model.pose_mean.copy_(mean)
     model.pose_scale.copy_(scale)
-
-
-def key_graph(
-    under: np.ndarray, pairs: np.ndarray, moves: np.ndarray, confidence: float = KEY_GRAPH_CONFIDENCE
-) -> np.ndarray:
-    """Where the keys lie relative to each other, from steps between them: (keys, 2) in action units,
-    centred, NaN for a key no such step reached.
-
-    ``under`` (N, keys + 1) are the frames' key distributions (the last class: none), ``pairs`` (M, 2)
-    the steps' frames and ``moves`` (M, 2) their actions' moves. Each step from one key to another,
-    both read with at least ``confidence``, says ``place[next] - place[this] = move``; the places are
-    the least-squares solution (a graph of keys, the layout as touch and the actions tell it). On the
-    discrete tasks the moves between cells are exact; on the continuous ones each also carries the
-    taps' offsets on their keys, which the many steps average out.
-    """
-    keys = under.shape[1] - 1
-    read, sure = under.argmax(-1), under.max(-1) >= confidence
-    this, following = read[pairs[:, 0]], read[pairs[:, 1]]
-    use = sure[pairs[:, 0]] & sure[pairs[:, 1]] & (this < keys) & (following < keys) & (this != following)
-    use &= np.isfinite(moves).all(-1) & np.any(moves != 0, axis=-1)  # a press stays: its reads tell nothing
-    places = np.full((keys, 2), np.nan, dtype=np.float32)
-    linked = np.unique(np.concatenate([this[use], following[use]]))
-    if not len(linked):
-        return places
-    column = np.full(keys, -1)
-    column[linked] = np.arange(len(linked))
-    rows = np.count_nonzero(use)
-    system = np.zeros((rows + 1, len(linked)))
-    system[np.arange(rows), column[following[use]]] += 1.0
-    system[np.arange(rows), column[this[use]]] -= 1.0
-    system[rows] = 1.0  # the gauge: centred
-    targets = np.concatenate([moves[use], np.zeros((1, 2))])
-    places[linked] = np.linalg.lstsq(system, targets, rcond=None)[0]
-    return places
