@@ -9,6 +9,11 @@ docs/results.md.
     python benchmarks/fast_ablation.py --task DiscreteAlphabet-v0 --algo dqn --seeds 0
     python benchmarks/fast_ablation.py --variants fast no-refits --seeds 0 1 2
     python benchmarks/fast_ablation.py --task ContinuousAlphabet-v0 --algo sac --variants latent
+    python benchmarks/fast_ablation.py --task DiscreteArrows-v0 --variants tactile-no-goal-offsets \
+        tactile-features tactile-paper-relabel paper+all --seeds 0 1 2 --archive results/ablation-tactile
+
+``--archive DIR`` copies each run's record (with its typing evaluation) to DIR, where ``make results``
+finds it.
 
 Variants (``fast`` with one change each; ``paper+all`` is the paper's preset
 with only the relabelling of every transition added, on images):
@@ -25,6 +30,7 @@ from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.report import convergence_epoch
 from tactile_braille.agents.run import read_progress, setting_differences
 from tactile_braille.agents.training import train
+from tactile_braille.sweep import archive_run
 
 VARIANTS = {
     "fast": ("fast", {}),
@@ -45,6 +51,11 @@ VARIANTS = {
         "fast",
         {"agent": {"critic_pose": True}, "touch": {"inputs": "readout", "goal_positions": True}},
     ),
+    # fast-tactile's parts taken away: the goal's offset (the learner sees the readout and the goal
+    # one-hot), then the readout (the encoder's features), or the relabelling of every transition.
+    "tactile-no-goal-offsets": ("fast-tactile", {"touch": {"goal_positions": False}}),
+    "tactile-features": ("fast-tactile", {"touch": {"inputs": "features", "goal_positions": False}}),
+    "tactile-paper-relabel": ("fast-tactile", {"replay": {"relabel": "paper"}}),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
                    VARIANTS.items())  # fmt: skip
@@ -58,16 +69,17 @@ def main() -> None:
     parser.add_argument("--algo", default="dqn")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
-    parser.add_argument("--epochs", type=int, default=None, help="default: the fast preset's")
+    parser.add_argument("--epochs", type=int, default=None, help="default: each variant's preset's")
     parser.add_argument("--root", type=Path, default=Path("runs/ablation"))
+    parser.add_argument("--archive", type=Path, default=None, help="copy each run's record here")
     args = parser.parse_args()
     task = f"tactile_braille/{args.task}"
-    epochs = args.epochs or preset_config("fast", task, args.algo).epochs
-    print(f"{args.task}, {args.algo}, {epochs} epochs, seeds {args.seeds}")
+    print(f"{args.task}, {args.algo}, seeds {args.seeds}")
     print("| variant | seeds | convergence epoch (paper's rule) | first epoch >= 0.95 | minutes per run |")
     print("|---|---|---|---|---|")
     for name in args.variants:
         preset, changes = VARIANTS[name]
+        epochs = args.epochs or preset_config("fast" if preset == "paper" else preset, task, args.algo).epochs
         paper_rule, absolute, minutes = [], [], []
         for seed in args.seeds:
             run = args.root / f"{args.task.split('-')[0]}__{args.algo}__{name}__{seed}"
@@ -80,6 +92,8 @@ def main() -> None:
                 train(run_dir=run, resume=True, progress=False)
             else:
                 train(config, run_dir=run, progress=False)
+            if args.archive is not None:
+                archive_run(run, args.archive)
             returns = [row["test/episodic_return"] for row in read_progress(run)]
             paper_rule.append(convergence_epoch(returns))
             absolute.append(convergence_epoch(returns, level=0.95))

@@ -17,10 +17,15 @@ once in :mod:`~tactile_braille.agents.config`):
   readout, with the arm's pose and the goal placed on the calibrated layout
   as inputs; on the continuous alphabet also asymmetric critics that see the
   sensor pose (:func:`fast_changes`).
+* ``fast-tactile`` is ``fast`` on the ``tactile`` track: its touch encoder
+  learns from the observation dictionary alone (touch odometry, pressed keys,
+  press outcomes and each key's offset learnt in hindsight from the run's
+  presses), and neither the agent nor its critics see the arm's pose
+  (:func:`fast_tactile_changes`).
 
 Each preset declares its track (:data:`PRESET_TRACKS`, docs/benchmark.md):
-``paper`` and ``released`` are ``tactile``, ``fast`` (whose encoder learns from
-the arm's pose and the key layout) is ``proprio``.
+``paper``, ``released`` and ``fast-tactile`` are ``tactile``, ``fast`` (whose
+encoder learns from the arm's pose and the key layout) is ``proprio``.
 
 >>> config = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn")
 >>> config.epochs, config.updates_per_step, config.agent.gamma
@@ -144,9 +149,10 @@ def fast_changes(task: str, algo: str) -> dict[str, Any]:
 def fast_tactile_changes(task: str, algo: str) -> dict[str, Any]:
     """What ``fast-tactile`` changes on top of the paper's settings: ``fast`` on the ``tactile`` track.
 
-    Its touch encoder learns from the observations alone (touch odometry and the pressed keys,
-    ``touch.labels="observation"``), the goal is placed where the run itself pressed that key, and
-    neither the agent nor its critics see the arm's pose.
+    Its touch encoder learns from the observations alone (``touch.labels="observation"``: touch
+    odometry, pressed keys, press outcomes, and each key's offset from the sensor learnt in hindsight
+    from the run's presses); the learner sees its goal's offset (``touch.goal_positions`` with these
+    labels), and neither it nor its critics see the arm's pose.
     """
     changes = fast_changes(task, algo)
     changes["epochs"] = FAST_TACTILE_EPOCHS[family(task)]

@@ -19,6 +19,13 @@ are the run's own steps, labelled in its replay, and the encoder is refitted
 on them every ``touch_refit_every`` steps). Nothing about the goal or the
 reward is used.
 
+The ``tactile`` track has no such labels: :func:`fit_touch_odometry` fits the
+same encoder (``labels="observation"``) on what the observations of the run's
+steps carry (:class:`Transitions`: consecutive frames, the documented effect
+of each previous action, the achieved goals): touch odometry, the pressed key,
+the key a step presses, and where each key lies from the sensor, learnt in
+hindsight from the run's presses (:func:`hindsight_offsets`).
+
 >>> import numpy as np
 >>> taps = LabelledTaps()
 >>> taps.add(np.zeros((100, 100, 1), np.uint8), np.array([0.0, 1.0, 4.0]), pressed=-1)
@@ -387,7 +394,7 @@ def fit_touch_odometry(
 ) -> tuple[TouchEncoder, dict[str, float]]:
     """Fit a touch encoder on what the observations carry: its previous actions and achieved goals.
 
-    No pose and no layout. Three objectives share the encoder's features:
+    No pose and no layout. Four objectives share the encoder's features:
 
     * touch odometry: the pose head learns coordinates in which every step's
       move is its action's, ``pose(next)[:2] - pose(this)[:2] = move`` (a
