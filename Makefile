@@ -58,11 +58,13 @@ bench: $(STAMP)
 # (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md).
 # results/tuning/ holds the runs settings were chosen on (their seeds are not reported): left out here.
 RECORDS = $(sort $(filter-out results/tuning/%,$(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json)))))
+# results/ablation-*/ hold ablations (a preset with one part taken away): tabled, not ranked.
+RANKED = $(filter-out results/ablation-%,$(RECORDS))
 RESULT_FILES = $(sort $(wildcard results/leaderboard/*/*.json))
 results: $(STAMP)
 	$(TB) report $(RECORDS) --output docs/results.md \
 		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
-	$(TB) leaderboard $(RECORDS) $(RESULT_FILES) --output docs/leaderboard.md \
+	$(TB) leaderboard $(RANKED) $(RESULT_FILES) --output docs/leaderboard.md \
 		--title "Leaderboard: typing on the braille keyboard"
 
 clean:
