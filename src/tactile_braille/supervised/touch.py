@@ -441,75 +441,105 @@ def fit_touch_odometry(
     if init is not None:
         model.load_state_dict(init.state_dict())
         model.requires_grad_(True)
-    images = torch.as_tensor(steps.images, device=device)
-    pairs = torch.as_tensor(steps.pairs, device=device)
-    effects = torch.as_tensor(steps.effects, dtype=torch.float32, device=device)
-    labels = torch.as_tensor(np.where(steps.pressed < 0, keys, steps.pressed), device=device)
-    aimed, offset = (torch.as_tensor(a, device=device) for a in hindsight_offsets(steps))
+    data = _StepTensors.of(steps, keys, device)
     optimiser = adam(model.parameters(), config.learning_rate)
     total = config.epochs * math.ceil(len(train) / config.batch_size)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, config.learning_rate, total_steps=total)
     train_index = torch.as_tensor(train, device=device)
 
-    def units(pose: torch.Tensor) -> torch.Tensor:  # the head's readout in action units
-        return pose * model.pose_scale + model.pose_mean
-
     def batch_loss(batch: torch.Tensor) -> torch.Tensor:
-        index = train_index[batch.to(device)]
-        both = pairs[index]
-        features = model.features(images[both.reshape(-1)]).reshape(len(index), 2, -1)
-        pose = units(model.pose(features))
-        effect = effects[index]
-        moved = pose[:, 1, :2] - pose[:, 0, :2]
-        move = F.smooth_l1_loss(moved, effect[:, :2], beta=ODOMETRY_BETA)
-        depth = F.smooth_l1_loss(pose[:, 1, 2], effect[:, 2], beta=ODOMETRY_BETA)
-        pressed = F.cross_entropy(model.key(features[:, 1]), labels[index])
-        # Most steps press nothing, which their depth alone tells: they weigh less.
-        weight = torch.where(labels[index] == keys, NOTHING_PRESSED_WEIGHT, 1.0)
-        outcome = F.cross_entropy(
-            model.press_outcome(features[:, 0], effect), labels[index], reduction="none"
-        )
-        outcome = (weight * outcome).sum() / weight.sum()
-        # Where the key this episode went on to press lies from this frame (hindsight offsets).
-        known = aimed[index] >= 0
-        predicted = model.offsets(features[known, 0]).reshape(-1, keys, 2)
-        predicted = predicted[torch.arange(len(predicted)), aimed[index][known]]
-        offsets = F.smooth_l1_loss(predicted, offset[index][known], beta=ODOMETRY_BETA, reduction="sum")
-        return move + depth + pressed + outcome + offsets / len(index)
+        return _odometry_loss(model, data, train_index[batch.to(device)])
 
     fit_minibatches(
         model, len(train), batch_loss, optimiser, config.epochs, config.batch_size, generator, schedule
     )
     model.eval().requires_grad_(False)
     with torch.no_grad():
-        frames = torch.unique(pairs)
-        poses = torch.cat([units(model(images[chunk])[0]) for chunk in frames.split(1024)])
+        frames = torch.unique(data.pairs)
+        poses = torch.cat([_units(model, model(data.images[chunk])[0]) for chunk in frames.split(1024)])
         _standardise_head(model, poses.mean(0), poses.std(0) + 1e-3)
-    metrics = {"touch/taps": float(len(steps.images)), "touch/aimed_steps": float((aimed >= 0).sum())}
+    metrics = {"touch/taps": float(len(steps.images)), "touch/aimed_steps": float((data.aimed >= 0).sum())}
     if len(held):
         with torch.no_grad():
-            both = pairs[torch.as_tensor(held, device=device)]
-            pose, logits = model(images[both.reshape(-1)])
-        pose = (units(pose).reshape(len(held), 2, 3)).cpu().numpy()
-        error = pose[:, 1, :2] - pose[:, 0, :2] - steps.effects[held, :2]
-        metrics["touch/odometry_error"] = float(np.median(np.linalg.norm(error, axis=-1)))
-        predicted = logits.reshape(len(held), 2, -1)[:, 1].argmax(-1).cpu()
-        metrics["touch/key_accuracy"] = float((predicted == labels[held].cpu()).float().mean())
-        with torch.no_grad():
-            features = model.features(images[both[:, 0]])
-            outcome = model.press_outcome(features, effects[torch.as_tensor(held, device=device)]).argmax(-1)
-        pressing = labels[held] < keys
-        if pressing.any():  # how often the key a press pressed was foreseen from the frame before it
-            metrics["touch/outcome_accuracy"] = float((outcome == labels[held])[pressing].float().mean())
-        held_t = torch.as_tensor(held, device=device)
-        known = aimed[held_t] >= 0
-        if known.any():  # how far off the offset to the key an episode went on to press was
-            with torch.no_grad():
-                predicted = model.offsets(features[known]).reshape(-1, keys, 2)
-            predicted = predicted[torch.arange(len(predicted)), aimed[held_t][known]]
-            error = torch.linalg.norm(predicted - offset[held_t][known], dim=-1)
-            metrics["touch/offset_error"] = float(error.median())
+            metrics.update(_held_out_figures(model, data, torch.as_tensor(held, device=device)))
     return model, metrics
+
+
+@dataclass(frozen=True)
+class _StepTensors:
+    """A :class:`Transitions` on the fit's device, with the labels its losses read."""
+
+    images: torch.Tensor  # (N, 1, H, W) uint8
+    pairs: torch.Tensor  # (M, 2)
+    effects: torch.Tensor  # (M, 3)
+    labels: torch.Tensor  # (M,) the pressed key; keys for none
+    aimed: torch.Tensor  # (M,) the key the episode went on to press, -1 none
+    offset: torch.Tensor  # (M, 2) where it lay from the step's first frame
+    keys: int
+
+    @classmethod
+    def of(cls, steps: Transitions, keys: int, device: torch.device) -> _StepTensors:
+        aimed, offset = hindsight_offsets(steps)
+        return cls(
+            torch.as_tensor(steps.images, device=device),
+            torch.as_tensor(steps.pairs, device=device),
+            torch.as_tensor(steps.effects, dtype=torch.float32, device=device),
+            torch.as_tensor(np.where(steps.pressed < 0, keys, steps.pressed), device=device),
+            torch.as_tensor(aimed, device=device),
+            torch.as_tensor(offset, device=device),
+            keys,
+        )
+
+
+def _units(model: TouchEncoder, pose: torch.Tensor) -> torch.Tensor:
+    """The pose head's output in action units."""
+    return pose * model.pose_scale + model.pose_mean
+
+
+def _odometry_loss(model: TouchEncoder, data: _StepTensors, index: torch.Tensor) -> torch.Tensor:
+    """The four objectives of :func:`fit_touch_odometry` on the steps ``index``."""
+    features = model.features(data.images[data.pairs[index].reshape(-1)]).reshape(len(index), 2, -1)
+    pose = _units(model, model.pose(features))
+    effect, labels = data.effects[index], data.labels[index]
+    moved = pose[:, 1, :2] - pose[:, 0, :2]
+    move = F.smooth_l1_loss(moved, effect[:, :2], beta=ODOMETRY_BETA)
+    depth = F.smooth_l1_loss(pose[:, 1, 2], effect[:, 2], beta=ODOMETRY_BETA)
+    pressed = F.cross_entropy(model.key(features[:, 1]), labels)
+    # Most steps press nothing, which their depth alone tells: they weigh less.
+    weight = torch.where(labels == data.keys, NOTHING_PRESSED_WEIGHT, 1.0)
+    outcome = F.cross_entropy(model.press_outcome(features[:, 0], effect), labels, reduction="none")
+    outcome = (weight * outcome).sum() / weight.sum()
+    # Where the key this episode went on to press lies from this frame (hindsight offsets).
+    known = data.aimed[index] >= 0
+    predicted = model.offsets(features[known, 0]).reshape(-1, data.keys, 2)
+    predicted = predicted[torch.arange(len(predicted)), data.aimed[index][known]]
+    offsets = F.smooth_l1_loss(predicted, data.offset[index][known], beta=ODOMETRY_BETA, reduction="sum")
+    return move + depth + pressed + outcome + offsets / len(index)
+
+
+def _held_out_figures(model: TouchEncoder, data: _StepTensors, held: torch.Tensor) -> dict[str, float]:
+    """:func:`fit_touch_odometry`'s figures on the held-out steps (a fitted, frozen encoder)."""
+    both = data.pairs[held]
+    features = model.features(data.images[both.reshape(-1)]).reshape(len(held), 2, -1)
+    pose = _units(model, model.pose(features))
+    error = pose[:, 1, :2] - pose[:, 0, :2] - data.effects[held, :2]
+    labels = data.labels[held]
+    figures = {
+        "touch/odometry_error": float(torch.linalg.norm(error, dim=-1).median()),
+        "touch/key_accuracy": float((model.key(features[:, 1]).argmax(-1) == labels).float().mean()),
+    }
+    pressing = labels < data.keys
+    if pressing.any():  # how often the key a press pressed was foreseen from the frame before it
+        outcome = model.press_outcome(features[:, 0], data.effects[held]).argmax(-1)
+        figures["touch/outcome_accuracy"] = float((outcome == labels)[pressing].float().mean())
+    known = data.aimed[held] >= 0
+    if known.any():  # how far off the offset to the key an episode went on to press was
+        predicted = model.offsets(features[known, 0]).reshape(-1, data.keys, 2)
+        predicted = predicted[torch.arange(len(predicted)), data.aimed[held][known]]
+        figures["touch/offset_error"] = float(
+            torch.linalg.norm(predicted - data.offset[held][known], dim=-1).median()
+        )
+    return figures
 
 
 def hindsight_offsets(steps: Transitions) -> tuple[np.ndarray, np.ndarray]:
