@@ -377,3 +377,12 @@ def test_space_has_a_cell_as_wide_as_its_bar():
     assert locate((x, y + half_mm + 0.5)) == -1  # LEFTALT, not a task key
     assert locate((x, y - half_mm - 0.5)) == -1  # RIGHTALT
     assert locate((x - 10.0, y)) == ALPHABET_KEYS.index("B")  # the key above its centre
+
+
+def test_an_encoder_takes_the_labels_a_run_can_be_set_to_and_refuses_others():
+    from tactile_braille.agents.config import TOUCH_LABELS as SETTINGS
+    from tactile_braille.supervised.touch import TOUCH_LABELS
+
+    assert SETTINGS == TOUCH_LABELS  # the torch-free settings spell out the encoder's choices
+    with pytest.raises(ValueError, match="labels must be one of"):
+        TouchEncoder(GOALS, features=4, hidden=8, labels="pose")
