@@ -186,8 +186,9 @@ def test_goal_offsets_show_the_learner_only_its_goals_offset_from_the_sensor(dis
 def test_goal_offsets_need_an_encoder_fitted_on_observations_and_its_readout(discrete_env):
     robot = TouchEncoder(GOALS, features=FEATURES, hidden=8)
     observation = TouchEncoder(GOALS, features=FEATURES, hidden=8, labels="observation")
-    for encoder, inputs in ((robot, "readout"), (observation, "features")):
+    for encoder, inputs, pose in ((robot, "readout", False), (observation, "features", False),
+                                  (observation, "readout", True)):  # fmt: skip
         space = feature_space(discrete_env.observation_space, 8)
         learner = DQNAgent(space, discrete_env.action_space, DQNConfig(hidden=(16,)))
         with pytest.raises(ValueError, match="goal_offsets"):
-            TouchAgent(learner, encoder, inputs=inputs, goal_offsets=True)
+            TouchAgent(learner, encoder, inputs=inputs, pose_inputs=pose, goal_offsets=True)

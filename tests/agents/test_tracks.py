@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+import toys
 from agents_helpers import read_progress_csv, touch_config, train_module
 from tactile_braille.agents import TrainConfig, train
 from tactile_braille.agents.config import TRACKS, proprio_settings
@@ -153,3 +154,17 @@ def test_a_run_with_pose_inputs_acts_on_the_pose_its_observation_carries(env_dat
     blind = {name: value for name, value in observation.items() if name != "sensor_pose"}
     with pytest.raises(ValueError, match="make its environment with proprio=True"):
         agent.policy_action(blind, 0, explore=False, rng=rng, deterministic=True)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"touch": {"enabled": False, "labels": "observation"}}, "set touch.enabled too"),
+        ({"task": "toys/BitFlipPress-v0", "touch": {"labels": "observation"}},
+         "reads the braille tasks' documented actions"),
+    ],
+)  # fmt: skip
+def test_observation_labels_need_an_encoder_and_a_braille_task(changes, message):
+    toys.register()
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(**{"algo": "dqn", "start_steps": 20, "touch": {"enabled": True}, **changes})

@@ -439,6 +439,10 @@ class TrainConfig:
         if task is not None and task.continuous != (self.algo in CONTINUOUS_ALGORITHMS):
             kind = "continuous" if self.algo in CONTINUOUS_ALGORITHMS else "discrete"
             raise ValueError(f"{self.algo} needs a {kind} task, got {self.task}")
+        if self.touch.labels == "observation" and task is None:
+            raise ValueError(
+                f"touch.labels='observation' reads the braille tasks' documented actions, got {self.task}"
+            )
         if self.touch.goal_positions and task is None:
             raise ValueError(
                 f"touch.goal_positions needs a braille task (a keyboard layout), got {self.task}"
@@ -462,6 +466,8 @@ class TrainConfig:
                 raise ValueError(
                     f"{name} learns from a touch encoder's labelled frames: set touch.enabled too"
                 )
+        if touch.labels != "robot" and not touch.enabled:
+            raise ValueError(f"touch.labels={touch.labels!r} is the touch encoder's: set touch.enabled too")
         if touch.goal_positions and touch.labels == "observation" and touch.inputs != "readout":
             raise ValueError(
                 "touch.goal_positions with touch.labels='observation' reads the goal's offset off the "

@@ -78,6 +78,8 @@ class TouchAgent:
                 "goal_offsets takes the key offsets of an encoder fitted on observations "
                 "(labels='observation'), and no calibrated key_positions_mm"
             )
+        if goal_offsets and pose_inputs:
+            raise ValueError("goal_offsets reads the readout's last numbers, which pose_inputs would take")
         if goal_offsets and inputs != "readout":
             raise ValueError("goal_offsets reads the key offsets off the encoder's readout: inputs='readout'")
         self.goal_offsets = bool(goal_offsets)
