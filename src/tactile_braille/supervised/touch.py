@@ -419,8 +419,7 @@ def fit_touch_odometry(
       actions tell it, relative to the sensor.
 
     Returns the encoder (frozen, eval mode) and figures on held-out steps
-    (whose frames the neighbouring training steps share, so the odometry
-    figure is nearer a training error than the robot fit's held-out taps):
+    (whose frames neighbouring training steps share: near training errors):
     ``touch/odometry_error`` (median planar error of a step, action units),
     ``touch/key_accuracy`` (pressed key, "none" included),
     ``touch/outcome_accuracy`` (the key each held-out press pressed, foreseen
