@@ -37,6 +37,11 @@ def process_frame(frame: np.ndarray, processing: ImageProcessing | None = None) 
     cropped = frame[y0:y1, x0:x1]
     size = processing.size_px
     resized = cv2.resize(cropped, (size, size), interpolation=cv2.INTER_AREA)
+    return threshold_image(resized, processing)
+
+
+def threshold_image(resized: np.ndarray, processing: ImageProcessing) -> np.ndarray:
+    """The last step of :func:`process_frame`: the adaptive mean threshold of the resized grey image."""
     return cv2.adaptiveThreshold(
         resized,
         255,

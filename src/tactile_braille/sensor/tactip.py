@@ -27,6 +27,7 @@ along the keyboard's ``x`` (towards the typist) and columns along ``-y``.
 from __future__ import annotations
 
 from functools import cached_property
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -37,7 +38,24 @@ from tactile_braille.sensor.processing import process_frame
 
 _ELLIPSE_VERTICES = 6
 _SUBPIXEL_BITS = 4
-_NOISE_BANK_MARGIN_PX = 64
+NOISE_BANK_MARGIN_PX = 64
+
+
+class FrameNuisance(NamedTuple):
+    """The nuisances of one rendered frame (none: the noiseless ideal).
+
+    Attributes:
+        dx_mm, dy_mm, dyaw_deg: unmodelled pose error added to the tap's pose.
+        gain: lighting gain of the frame.
+        noise_offset_px: (row, column) of the frame's window into the sensor's
+            fixed bank of pixel noise, or None for no pixel noise.
+    """
+
+    dx_mm: float = 0.0
+    dy_mm: float = 0.0
+    dyaw_deg: float = 0.0
+    gain: float = 1.0
+    noise_offset_px: tuple[int, int] | None = None
 
 
 class TacTip:
@@ -210,11 +228,29 @@ class TacTip:
     def _noise_bank(self) -> tuple[np.ndarray, np.ndarray]:
         width, height = self.config.camera_px
         bank_rng = np.random.default_rng(0x7AC71B)
-        shape = (height + _NOISE_BANK_MARGIN_PX, width + _NOISE_BANK_MARGIN_PX)
+        shape = (height + NOISE_BANK_MARGIN_PX, width + NOISE_BANK_MARGIN_PX)
         noise = np.rint(self.config.nuisance.pixel_noise_std * bank_rng.standard_normal(shape))
         # Stored as its positive and negative parts: two saturating uint8
         # operations are 3-4x faster than one mixed-type addition.
         return np.clip(noise, 0, 255).astype(np.uint8), np.clip(-noise, 0, 255).astype(np.uint8)
+
+    def draw_nuisance(self, rng: np.random.Generator) -> FrameNuisance:
+        """One frame's nuisances from ``rng``: pose jitter, lighting gain, noise offset.
+
+        The draws, in this order, are those every rendered frame makes; the
+        batched renderer (:mod:`tactile_braille.sensor.batched`) takes them so
+        that both paths render the same frame from the same generator.
+        """
+        nuisance = self.config.nuisance
+        dx = nuisance.position_jitter_mm * rng.standard_normal()
+        dy = nuisance.position_jitter_mm * rng.standard_normal()
+        dyaw = nuisance.yaw_jitter_deg * rng.standard_normal()
+        gain = max(1.0 + nuisance.lighting_gain_std * rng.standard_normal(), 0.1)
+        offset = None
+        if nuisance.pixel_noise_std > 0:
+            row, col = rng.integers(0, NOISE_BANK_MARGIN_PX, size=2)
+            offset = (int(row), int(col))
+        return FrameNuisance(float(dx), float(dy), float(dyaw), float(gain), offset)
 
     def render_frame(
         self,
@@ -231,22 +267,22 @@ class TacTip:
         ``rng`` draws the nuisances (pose jitter, lighting, pixel noise);
         without it the frame is the noiseless ideal.
         """
-        config = self.config
-        nuisance = config.nuisance
-        gain = 1.0
-        if rng is not None:
-            x_mm += nuisance.position_jitter_mm * rng.standard_normal()
-            y_mm += nuisance.position_jitter_mm * rng.standard_normal()
-            yaw_deg += nuisance.yaw_jitter_deg * rng.standard_normal()
-            gain = max(1.0 + nuisance.lighting_gain_std * rng.standard_normal(), 0.1)
-        indentation = self.indentation_mm(surface, x_mm, y_mm, apex_height_mm, yaw_deg, key_descent_mm)
+        drawn = FrameNuisance() if rng is None else self.draw_nuisance(rng)
+        indentation = self.indentation_mm(
+            surface,
+            x_mm + drawn.dx_mm,
+            y_mm + drawn.dy_mm,
+            apex_height_mm,
+            yaw_deg + drawn.dyaw_deg,
+            key_descent_mm,
+        )
         positions = self.pin_rest_mm + self.pin_displacement_mm(indentation)
 
-        frame = cv2.convertScaleAbs(self._background, alpha=gain)
-        self._draw_pins(frame, positions, gain)
-        if rng is not None and nuisance.pixel_noise_std > 0:
+        frame = cv2.convertScaleAbs(self._background, alpha=drawn.gain)
+        self._draw_pins(frame, positions, drawn.gain)
+        if drawn.noise_offset_px is not None:
             height, width = frame.shape
-            dy, dx = rng.integers(0, _NOISE_BANK_MARGIN_PX, size=2)
+            dy, dx = drawn.noise_offset_px
             brighter, darker = self._noise_bank
             cv2.add(frame, brighter[dy : dy + height, dx : dx + width], dst=frame)
             cv2.subtract(frame, darker[dy : dy + height, dx : dx + width], dst=frame)
