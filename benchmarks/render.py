@@ -1,11 +1,20 @@
-"""Rendered-and-processed tactile observations per second on one core.
+"""Rendered-and-processed tactile observations per second: the single-tap renderer and the batched one.
 
-Renders random taps over the alphabet keys with the virtual rig's TacTip
-(contact, skin, pins, 640x480 camera frame with noise) and runs the shared
-image processing on each frame, then reports the rate for each stage side by
-side. Target: at least 1,000 observations per second on one core.
+Renders random taps over the alphabet keys (3.5-8 mm deep, yaw within 10
+degrees, with the sensor's nuisances) with the virtual rig and processes each
+frame, then the same taps with the batched renderer
+(:mod:`tactile_braille.sensor.batched`), and prints side by side, in one run:
 
-    python benchmarks/render.py [--taps 2000]
+* the single-tap reference (OpenCV; render and processing apart), one core;
+* the batched renderer on the CPU, with its per-tap stages in OpenCV and in
+  torch, one thread, with the share of pixels equal to the reference's;
+* on a CUDA machine, the batched renderer at batch 4,096 (target: 100,000
+  observations per second).
+
+Targets: the single-tap renderer >= 1,000 observations per second on one core
+(331-pin tip); the batched one >= 5x that on the CPU.
+
+    python benchmarks/render.py [--taps 1000] [--gpu-batch 4096]
 """
 
 from __future__ import annotations
@@ -18,45 +27,86 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import cv2
 import numpy as np
+import torch
 
 from tactile_braille.keyboard.layout import ALPHABET_KEYS
 from tactile_braille.rigs.virtual import VirtualRig
 from tactile_braille.sensor.processing import process_frame
 
 
-def measure(sensor: str, taps: int) -> tuple[float, float]:
-    """Seconds spent rendering and processing ``taps`` random taps."""
-    rig = VirtualRig(sensor=sensor, seed=0)
-    rng = np.random.default_rng(1)
+def random_taps(rig: VirtualRig, taps: int, seed: int = 1):
+    """(x, y, depth, yaw, seeds) of ``taps`` random taps over the alphabet keys."""
+    rng = np.random.default_rng(seed)
     centres = np.array([rig.layout.centre_mm(k) for k in ALPHABET_KEYS])
     poses = centres[rng.integers(len(centres), size=taps)] + rng.uniform(-3, 3, (taps, 2))
-    depths = rng.uniform(3.5, 8.0, taps)
-    rig.tap(*poses[0], depths[0])  # build the rasters and caches outside the timing
+    return poses[:, 0], poses[:, 1], rng.uniform(3.5, 8.0, taps), rng.uniform(-10, 10, taps), np.arange(taps)
+
+
+def single_tap(rig: VirtualRig, x, y, depth, yaw, seeds) -> tuple[float, float, np.ndarray]:
+    """Seconds rendering and processing each tap with the reference, and its observations."""
     render_s = process_s = 0.0
-    for (x, y), depth in zip(poses, depths, strict=True):
+    images = []
+    for tap in zip(x, y, depth, yaw, seeds, strict=True):
         start = time.perf_counter()
-        frame = rig.tap(x, y, depth).frame
+        rig.reseed(int(tap[-1]))
+        frame = rig.tap(*tap[:-1]).frame
         middle = time.perf_counter()
-        process_frame(frame, rig.sensor.config.processing)
+        images.append(process_frame(frame, rig.sensor.config.processing))
         render_s += middle - start
         process_s += time.perf_counter() - middle
-    return render_s, process_s
+    return render_s, process_s, np.stack(images)
+
+
+def batched(rig: VirtualRig, taps, device: str, kernels: str, repeats: int = 1) -> tuple[float, np.ndarray]:
+    """Seconds per call of the batched renderer on ``taps`` (best of ``repeats``), and its observations."""
+    rig.observe_taps(*(a[:8] for a in taps), device=device, kernels=kernels)  # tables, warm-up: not timed
+    best = float("inf")
+    for _ in range(repeats):
+        if device.startswith("cuda"):
+            torch.cuda.synchronize()
+        start = time.perf_counter()
+        images, _ = rig.observe_taps(*taps, device=device, kernels=kernels)  # host arrays: the copy back too
+        best = min(best, time.perf_counter() - start)
+    return best, images
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--taps", type=int, default=2000)
+    parser.add_argument("--taps", type=int, default=1000, help="taps per sensor on the CPU")
+    parser.add_argument("--gpu-batch", type=int, default=4096, help="batch size on a CUDA device")
     args = parser.parse_args()
     cv2.setNumThreads(1)
+    torch.set_num_threads(1)
     n = args.taps
-    print(f"taps: {n} per sensor on one core (OpenCV threads: {cv2.getNumThreads()})")
-    print(f"{'sensor':12s} {'render/s':>9s} {'process/s':>10s} {'obs/s':>7s} {'processing share':>17s}")
+    print(f"taps: {n} per sensor, one core (OpenCV threads {cv2.getNumThreads()}, torch threads 1)")
+    header = f"{'sensor':12s} {'renderer':34s} {'obs/s':>8s} {'x single':>9s} {'pixels equal':>13s}"
+    print(header)
     for sensor in ("braille_331", "tactip_127"):
-        render_s, process_s = measure(sensor, n)
-        total = n / (render_s + process_s)
+        rig = VirtualRig(sensor=sensor, seed=0)
+        taps = random_taps(rig, n)
+        rig.tap(taps[0][0], taps[1][0], 5.0)  # rasters and caches outside the timing
+        render_s, process_s, reference = single_tap(rig, *taps)
+        single = n / (render_s + process_s)
         share = process_s / (render_s + process_s)
-        print(f"{sensor:12s} {n / render_s:9.0f} {n / process_s:10.0f} {total:7.0f} {share:17.1%}")
-    print("target: >= 1000 rendered-and-processed observations per second (braille_331)")
+        print(
+            f"{sensor:12s} {f'single tap (processing {share:.0%})':34s} {single:8.0f} {1.0:9.2f} {'-':>13s}"
+        )
+        for kernels in ("opencv", "torch"):
+            seconds, images = batched(rig, taps, "cpu", kernels)
+            equal = (images == reference).mean()
+            label = f"batched, cpu, {kernels} kernels"
+            print(f"{sensor:12s} {label:34s} {n / seconds:8.0f} {n / seconds / single:9.2f} {equal:13.4f}")
+        if torch.cuda.is_available():
+            big = random_taps(rig, args.gpu_batch, seed=2)
+            seconds, images = batched(rig, big, "cuda", "torch", repeats=5)
+            equal = (images[:n] == single_tap(rig, *(a[:n] for a in big))[2]).mean()
+            label = f"batched, {torch.cuda.get_device_name()} x{args.gpu_batch}"
+            rate = args.gpu_batch / seconds
+            print(f"{sensor:12s} {label[:34]:34s} {rate:8.0f} {rate / single:9.2f} {equal:13.4f}")
+        else:
+            print(f"{sensor:12s} {'batched, cuda':34s} {'(no CUDA device here)':>32s}")
+    print("targets: single tap >= 1,000 obs/s (braille_331); batched on the CPU >= 5x single;")
+    print("         on CUDA >= 100,000 obs/s at batch 4,096; pixels equal to the reference >= 0.995")
 
 
 if __name__ == "__main__":

@@ -113,10 +113,46 @@ def test_step_returns_batched_arrays(env_id, make_vec):
 
 
 def test_vector_env_refuses_other_backends_and_empty_batches(make_vec):
-    with pytest.raises(ValueError, match="dataset"):
+    with pytest.raises(ValueError, match="dataset or render backend, not 'rig'"):
+        make_vec("tactile_braille/DiscreteArrows-v0", backend="rig")
+    with pytest.raises(ValueError, match="takes no dataset"):
         make_vec("tactile_braille/DiscreteArrows-v0", backend="render")
     with pytest.raises(ValueError, match="num_envs"):
         make_vec("tactile_braille/DiscreteArrows-v0", num_envs=0)
+
+
+@pytest.mark.parametrize(
+    "env_id", ["tactile_braille/DiscreteAlphabet-v0", "tactile_braille/ContinuousArrows-v0"]
+)
+def test_render_backend_vector_env_renders_batches_as_the_reference_would(env_id):
+    """``make_vec(..., backend="render")``: batched spaces and steps; the batched renderer's taps are the
+    single-tap renderer's (same seed: same rewards, images alike in at least 99 % of pixels)."""
+    runs = {}
+    for device in ("cpu", None):
+        vec = gym.make_vec(
+            env_id,
+            num_envs=4,
+            vectorization_mode="vector_entry_point",
+            backend="render",
+            render_device=device,
+        )
+        assert vec.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+        assert vec.single_observation_space == gym.make(env_id, backend="render").observation_space
+        observations, _ = vec.reset(seed=3)
+        steps = [observations]
+        for actions in _batch_actions(env_id, steps=4, num_envs=4, seed=3):
+            observations, rewards, terminated, truncated, infos = vec.step(actions)
+            assert observations in vec.observation_space
+            assert rewards.shape == terminated.shape == truncated.shape == (4,)
+            np.testing.assert_array_equal(infos["is_success"], rewards == 1.0)
+            steps.append({**observations, "reward": rewards, "terminated": terminated})
+        runs[device] = steps
+        vec.close()
+    for batched, reference in zip(runs["cpu"], runs[None], strict=True):
+        for key in reference:
+            if key != "observation":
+                np.testing.assert_array_equal(batched[key], reference[key], err_msg=key)
+        assert (batched["observation"] == reference["observation"]).mean() >= 0.99
 
 
 def test_a_vector_env_refuses_a_step_before_its_first_reset(make_vec):

@@ -164,11 +164,16 @@ class RigBackend:
 
     Args:
         rig: the rig to tap with.
+        device: render a batch's taps at once with the batched renderer on
+            this torch device (``"cpu"``, ``"cuda"``; the virtual rig only).
+            None taps one at a time. Both draw the same randomness, so the
+            same seed gives the same taps (images equal in at least 99 % of
+            pixels).
     """
 
     name = "rig"
 
-    def __init__(self, rig: Rig) -> None:
+    def __init__(self, rig: Rig, device: str | None = None) -> None:
         from tactile_braille.envs.core import OBSERVATION_SIZE_PX
 
         if rig.processing.size_px != OBSERVATION_SIZE_PX:
@@ -176,8 +181,13 @@ class RigBackend:
                 f"the environments take {OBSERVATION_SIZE_PX}x{OBSERVATION_SIZE_PX} observations; "
                 f"this rig's processing makes {rig.processing.size_px}x{rig.processing.size_px}"
             )
+        if device is not None and not hasattr(rig, "observe_taps"):
+            raise ValueError(
+                f"a {type(rig).__name__} cannot render batches; use device=None to tap one at a time"
+            )
         self.rig = rig
         self.layout = rig.layout
+        self.device = device
 
     def describe(self) -> dict:
         """The world the images come from: the rig's own description (and the generator, if simulated)."""
@@ -189,11 +199,22 @@ class RigBackend:
             world["generator_version"] = GENERATOR_VERSION
         return world
 
-    def _tap(self, x: float, y: float, depth: float, yaw: float, rng: np.random.Generator):
-        self.rig.reseed(int(rng.integers(2**63 - 1)))
-        sample = self.rig.tap(x, y, depth, yaw)
-        code = self.layout.key(sample.pressed_key).index if sample.pressed_key is not None else -1
-        return process_frame(sample.frame, self.rig.processing), code
+    def _observe(self, x, y, depth, yaw, seeds) -> tuple[np.ndarray, np.ndarray]:
+        """Tap at every pose, the rig reseeded from ``seeds`` before each; returns (images, pressed codes)."""
+        if self.device is not None:
+            return self.rig.observe_taps(x, y, depth, yaw, seeds, device=self.device)
+        images, pressed = [], []
+        for tap_x, tap_y, tap_depth, tap_yaw, seed in zip(x, y, depth, yaw, seeds, strict=True):
+            self.rig.reseed(int(seed))
+            sample = self.rig.tap(tap_x, tap_y, tap_depth, tap_yaw)
+            images.append(process_frame(sample.frame, self.rig.processing))
+            pressed.append(
+                self.layout.key(sample.pressed_key).index if sample.pressed_key is not None else -1
+            )
+        size = self.rig.processing.size_px
+        return np.stack(images) if images else np.zeros((0, size, size), np.uint8), np.array(
+            pressed, np.int64
+        )
 
     def discrete_taps(
         self,
@@ -203,21 +224,23 @@ class RigBackend:
         rng: np.random.Generator,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Tap every cell; returns (images, pressed codes)."""
-        images, pressed = [], []
+        poses = []
         for code, pressing, (x, y) in zip(codes, press, positions_mm, strict=True):
             dx, dy = rng.uniform(-1.0, 1.0, 2)
             depth = (PRESS_DEPTH_MM if pressing else MOVE_TAP_DEPTH_MM) + rng.uniform(-1.0, 0.0)
             if code < 0:
                 depth = 0.0  # an off-key cell: the sensor touches nothing
-            image, pressed_code = self._tap(x + dx, y + dy, depth, rng.uniform(-10.0, 10.0), rng)
-            images.append(image)
-            pressed.append(pressed_code if pressing else -1)
-        return np.stack(images), np.array(pressed, dtype=np.int64)
+            yaw = rng.uniform(-10.0, 10.0)
+            poses.append((x + dx, y + dy, depth, yaw, rng.integers(2**63 - 1)))
+        x, y, depth, yaw, seeds = (
+            (np.array(column) for column in zip(*poses, strict=True)) if poses else [[]] * 5
+        )
+        images, pressed = self._observe(x, y, depth, yaw, seeds)
+        return images, np.where(np.asarray(press, bool), pressed, -1)
 
     def continuous_taps(
         self, x_mm: np.ndarray, y_mm: np.ndarray, depth_mm: np.ndarray, rng: np.random.Generator
     ) -> tuple[np.ndarray, np.ndarray]:
         """Tap at every pose; returns (images, pressed codes)."""
-        results = [self._tap(x, y, d, 0.0, rng) for x, y, d in zip(x_mm, y_mm, depth_mm, strict=True)]
-        images, pressed = zip(*results, strict=True)
-        return np.stack(images), np.array(pressed, dtype=np.int64)
+        seeds = [rng.integers(2**63 - 1) for _ in range(len(x_mm))]
+        return self._observe(x_mm, y_mm, depth_mm, np.zeros(len(x_mm)), seeds)

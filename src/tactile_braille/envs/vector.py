@@ -1,8 +1,11 @@
-"""Batched braille environments on the dataset backend, stepped with NumPy over the batch.
+"""Batched braille environments, stepped with NumPy over the batch.
 
 ``gym.make_vec("tactile_braille/DiscreteArrows-v0", num_envs=64,
 vectorization_mode="vector_entry_point")`` builds one. The rules are those of
-the single environments (the same :class:`BatchedBraille` core).
+the single environments (the same :class:`BatchedBraille` core). On the
+``render`` backend each step renders every sub-environment's tap at once with
+the batched renderer (:mod:`tactile_braille.sensor.batched`) on
+``render_device`` (``"cuda"`` for a GPU).
 
 Autoreset mode: ``NEXT_STEP`` (Gymnasium's default). When a sub-environment
 terminates or is truncated, the step returns its final observation; the
@@ -22,21 +25,28 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from tactile_braille.datasets.store import TactileDataset
-from tactile_braille.envs.backends import DatasetBackend
+from tactile_braille.envs.backends import DatasetBackend, RigBackend
 from tactile_braille.envs.core import BatchedBraille, compute_reward
 from tactile_braille.envs.tasks import MAX_EPISODE_STEPS, Task
+from tactile_braille.rigs.virtual import VirtualRig
+
+VECTOR_BACKENDS = ("dataset", "render")
 
 
 class VectorBrailleEnv(VectorEnv):
-    """``num_envs`` braille environments on the dataset backend (see the module docs).
+    """``num_envs`` braille environments on the dataset or render backend (see the module docs).
 
     Args:
         num_envs: batch size.
         keys: ``"arrows"`` or ``"alphabet"``.
-        dataset: the dataset or its path (default: the cached one).
-        sensor: sensor preset of the default dataset.
+        dataset: the dataset or its path (default: the cached one; dataset backend).
+        sensor: sensor preset (of the default dataset, or rendered).
         max_episode_steps: truncation (25, the registry's).
+        backend: ``"dataset"`` or ``"render"`` (the live renderer).
         proprio: observations also carry ``sensor_pose`` (the ``proprio`` track's).
+        render_device: the render backend's torch device for the batched
+            renderer (``"cpu"``, ``"cuda"``), or None to render each tap with
+            the single-tap reference renderer.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -51,16 +61,22 @@ class VectorBrailleEnv(VectorEnv):
         max_episode_steps: int = MAX_EPISODE_STEPS,
         backend: str = "dataset",
         proprio: bool = False,
+        render_device: str | None = "cpu",
     ) -> None:
-        if backend != "dataset":
-            raise ValueError("the vectorised environment runs on the dataset backend only")
+        if backend not in VECTOR_BACKENDS:
+            choices = " or ".join(VECTOR_BACKENDS)
+            raise ValueError(f"the vectorised environment runs on the {choices} backend, not {backend!r}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         self.num_envs = int(num_envs)
         self.task = Task(keys=keys, continuous=self.continuous)
-        self._core = BatchedBraille(
-            self.task, DatasetBackend(self.task, dataset, sensor=sensor), num_envs, proprio=proprio
-        )
+        if backend == "dataset":
+            source = DatasetBackend(self.task, dataset, sensor=sensor)
+        else:
+            if dataset is not None:
+                raise ValueError("the render backend renders its taps: it takes no dataset")
+            source = RigBackend(VirtualRig(sensor=sensor), device=render_device)
+        self._core = BatchedBraille(self.task, source, num_envs, proprio=proprio)
         self.single_observation_space = self._core.observation_space()
         self.single_action_space = self._core.action_space()
         self.observation_space = batch_space(self.single_observation_space, num_envs)
@@ -110,12 +126,12 @@ class VectorBrailleEnv(VectorEnv):
 
 
 class VectorDiscreteBrailleEnv(VectorBrailleEnv):
-    """Batched discrete braille environments (dataset backend)."""
+    """Batched discrete braille environments."""
 
     continuous: ClassVar[bool] = False
 
 
 class VectorContinuousBrailleEnv(VectorBrailleEnv):
-    """Batched continuous braille environments (dataset backend)."""
+    """Batched continuous braille environments."""
 
     continuous: ClassVar[bool] = True

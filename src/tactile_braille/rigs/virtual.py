@@ -60,6 +60,7 @@ class VirtualRig:
         self._rng = None if seed is None else np.random.default_rng(seed)
         self._pose = Pose(0.0, 0.0, 0.0, 0.0)
         self._closed = False
+        self._batched: dict[tuple, object] = {}  # batched renderers by (device, kernels), made on first use
 
     @property
     def pose(self) -> Pose:
@@ -95,6 +96,53 @@ class VirtualRig:
         )
         self._pose = Pose(pose.x_mm, pose.y_mm, 0.0, pose.yaw_deg)
         return TactileSample(frame=frame, pose=pose, pressed_key=pressed_key)
+
+    def observe_taps(
+        self,
+        x_mm: np.ndarray,
+        y_mm: np.ndarray,
+        depth_mm: np.ndarray,
+        yaw_deg: np.ndarray,
+        seeds: np.ndarray,
+        device: str = "cpu",
+        kernels: str | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The processed observations and pressed keys of many taps at once (the batched renderer).
+
+        Tap ``i`` is rendered as ``reseed(seeds[i])`` then ``tap(...)`` would
+        render it (the same nuisance draws), by
+        :class:`~tactile_braille.sensor.batched.BatchedTacTip` on ``device``
+        (with its ``kernels``): its processed image equals the single-tap
+        path's in at least 99 % of its pixels. The rig's pose does not change.
+
+        Returns:
+            uint8 observations (B, size, size) and the pressed key codes (B,):
+            the layout index of the key each tap actuated, or -1.
+
+        Raises:
+            OutOfWorkspaceError: a pose is outside the workspace (nothing is rendered).
+        """
+        from tactile_braille.sensor.batched import BatchedTacTip, TapNuisances
+
+        x, y, depth, yaw = (np.asarray(a, np.float64).reshape(-1) for a in (x_mm, y_mm, depth_mm, yaw_deg))
+        if not len(x) == len(y) == len(depth) == len(yaw) == len(seeds):
+            raise ValueError("x_mm, y_mm, depth_mm, yaw_deg and seeds must have one entry per tap")
+        for tap in zip(x, y, depth, yaw, strict=True):
+            self._check(Pose(*map(float, tap)))
+        margin = self.switch.actuation_margin_mm(self.layout, x, y, depth)
+        best = np.argmax(margin, axis=-1) if len(x) else np.zeros(0, np.int64)
+        pressed = np.where(np.take_along_axis(margin, best[:, None], axis=-1)[:, 0] >= 0, best, -1)
+        descent = np.clip(margin, 0.0, SWITCH_TOTAL_TRAVEL_MM - SWITCH_PRETRAVEL_MM)
+        nuisances = None
+        if self._rng is not None:
+            draws = [self.sensor.draw_nuisance(np.random.default_rng(int(seed))) for seed in seeds]
+            nuisances = TapNuisances.stack(draws)
+        if (device, kernels) not in self._batched:
+            self._batched[device, kernels] = BatchedTacTip(self.sensor, self.surface, device, kernels)
+        images = self._batched[device, kernels].observe(
+            x, y, self.clearance_mm - depth, yaw, descent, nuisances
+        )
+        return images.cpu().numpy(), pressed.astype(np.int64)
 
     def reseed(self, seed: int | Sequence[int]) -> None:
         """Restart the nuisance generator from ``seed`` (no effect on a noiseless rig)."""
