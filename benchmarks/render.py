@@ -14,7 +14,10 @@ frame, then the same taps with the batched renderer
 Targets: the single-tap renderer >= 1,000 observations per second on one core
 (331-pin tip); the batched one >= 5x that on the CPU.
 
-    python benchmarks/render.py [--taps 1000] [--gpu-batch 4096]
+    python benchmarks/render.py [--taps 1000] [--gpu-batch 4096] [--figure docs/images/batched_renderer.png]
+
+``--figure`` also draws four taps, from a light touch to a deep press, as the
+reference and the batched renderer see them, and where they differ.
 """
 
 from __future__ import annotations
@@ -74,7 +77,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--taps", type=int, default=1000, help="taps per sensor on the CPU")
     parser.add_argument("--gpu-batch", type=int, default=4096, help="batch size on a CUDA device")
+    parser.add_argument("--figure", help="also draw reference, batched and differences for four taps (PNG)")
     args = parser.parse_args()
+    if args.figure:
+        draw_comparison(args.figure)
     cv2.setNumThreads(1)
     torch.set_num_threads(1)
     n = args.taps
@@ -107,6 +113,34 @@ def main() -> None:
             print(f"{sensor:12s} {'batched, cuda':34s} {'(no CUDA device here)':>32s}")
     print("targets: single tap >= 1,000 obs/s (braille_331); batched on the CPU >= 5x single;")
     print("         on CUDA >= 100,000 obs/s at batch 4,096; pixels equal to the reference >= 0.995")
+
+
+def draw_comparison(output: str) -> None:
+    """Four taps on A (light to deep) by the reference and the batched renderer, and their differences."""
+    from tactile_braille._figures import new_figure, save_figure
+
+    rig = VirtualRig(seed=0)
+    x, y = rig.layout.centre_mm("A")
+    depths = np.array([4.0, 5.5, 7.0, 8.5])
+    taps = (np.full(4, x + 0.8), np.full(4, y - 0.5), depths, np.full(4, 4.0), np.arange(4))
+    reference = single_tap(rig, *taps)[2]
+    images, _ = rig.observe_taps(*taps)
+    fig, axes = new_figure(3, 4, figsize=(8.4, 6.6))
+    for column, depth in enumerate(depths):
+        differ = images[column] != reference[column]
+        overlay = np.stack([reference[column]] * 3, axis=-1) // 2
+        overlay[differ] = (255, 40, 40)
+        rows = (reference[column], images[column], overlay)
+        titles = (f"reference, {depth:.1f} mm", "batched", f"{differ.mean():.2%} of pixels differ")
+        for row, (image, title) in enumerate(zip(rows, titles, strict=True)):
+            axes[row, column].imshow(image, cmap="gray", vmin=0, vmax=255)
+            axes[row, column].set_title(title, fontsize=9)
+            axes[row, column].axis("off")
+    fig.suptitle(
+        "A tap on A (0.8 mm, -0.5 mm off its centre, yaw 4 deg): single-tap reference, batched renderer"
+    )
+    fig.tight_layout()
+    print(f"figure: {save_figure(fig, output)}")
 
 
 if __name__ == "__main__":
