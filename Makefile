@@ -57,12 +57,15 @@ bench: $(STAMP)
 # docs/leaderboard.md ranks those records and the results files of other libraries' agents
 # (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md).
 # results/tuning/ holds the runs settings were chosen on (their seeds are not reported): left out here.
-RECORDS = $(sort $(filter-out results/tuning/%,$(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json)))))
+# results/transfer/ holds runs typed in other worlds (evaluate --world): their own section.
+ALL_RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json))))
+RECORDS = $(filter-out results/tuning/% results/transfer/%,$(ALL_RECORDS))
+TRANSFER = $(filter results/transfer/%,$(ALL_RECORDS))
 # results/ablation-*/ hold ablations (a preset with one part taken away): tabled, not ranked.
 RANKED = $(filter-out results/ablation-%,$(RECORDS))
 RESULT_FILES = $(sort $(wildcard results/leaderboard/*/*.json))
 results: $(STAMP)
-	$(TB) report $(RECORDS) --output docs/results.md \
+	$(TB) report $(RECORDS) --output docs/results.md $(if $(TRANSFER),--transfer $(TRANSFER)) \
 		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
 	$(TB) leaderboard $(RANKED) $(RESULT_FILES) --output docs/leaderboard.md \
 		--title "Leaderboard: typing on the braille keyboard"

@@ -378,7 +378,14 @@ def _report(args: argparse.Namespace) -> int:
 
         notes = args.notes.read_text() if args.notes is not None else None
         command = "tactile-braille " + shlex.join(args.argv) if args.argv else None
-        results = write_results(args.runs, args.output, title=args.title, notes=notes, command=command)
+        results = write_results(
+            args.runs,
+            args.output,
+            title=args.title,
+            notes=notes,
+            command=command,
+            transfer_dirs=args.transfer,
+        )
         print(results.read_text().split("![training curves]")[0])
         print(f"wrote {results} and its figures")
     return 0
@@ -400,6 +407,9 @@ def _evaluate(args: argparse.Namespace) -> int:
             raise ValueError(
                 f"{run} is not a training run (no config.json); to score a callable, use --policy"
             )
+    if args.world:
+        return _evaluate_transfer(args)
+    for run in args.targets:
         result = evaluate_typing(run, sentences=not args.no_sentences, seed=args.seed)
         print(f"{run}: typing accuracy {result['accuracy']:.3f} over {result['keys_asked']} keys "
               f"({result['sequences']} sequences), {result['total_steps']} steps")  # fmt: skip
@@ -410,6 +420,21 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _evaluate_transfer(args: argparse.Namespace) -> int:
+    """``evaluate RUN_DIR... --world W``: type in other worlds; writes each run's transfer.json."""
+    from tactile_braille.evaluation.runs import TRANSFER_FILE, evaluate_transfer
+    from tactile_braille.evaluation.worlds import expand_worlds
+
+    expand_worlds(args.world)  # refuse a mistyped world before any run is loaded
+    for run in args.targets:
+        output = evaluate_transfer(run, args.world, seed=args.seed)
+        for name, scored in output["worlds"].items():
+            print(f"{run} in {name}: typing accuracy {scored['accuracy']:.3f} over "
+                  f"{scored['keys_asked']} keys, {scored['total_steps']} steps")  # fmt: skip
+        print(f"wrote {run / TRANSFER_FILE}")
+    return 0
+
+
 def _evaluate_policy(args: argparse.Namespace) -> int:
     """``evaluate --policy MODULE:NAME TASK``: score a user's callable and write its results file."""
     from tactile_braille.evaluation.results import make_result, write_result
@@ -417,6 +442,10 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
 
     if len(args.targets) != 1:
         raise ValueError(f"--policy scores one TASK, got {len(args.targets)} targets")
+    if args.world:
+        raise ValueError(
+            "--world is for RUN_DIRs; a callable types in the live renderer with --backend render"
+        )
     if args.method is None or args.output is None:
         raise ValueError("--policy needs --method NAME (free text) and --output FILE.json")
     if args.output.is_dir():
@@ -637,6 +666,14 @@ def _add_report_command(commands) -> None:
     """The ``report`` command."""
     report = commands.add_parser("report", help="reports of training runs (and over runs and seeds)")
     report.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
+    report.add_argument(
+        "--transfer",
+        nargs="+",
+        type=Path,
+        default=(),
+        metavar="RUN_DIR",
+        help="--output: runs whose transfer.json (evaluate --world) gets a section of its own",
+    )
     report.add_argument("--episodes", type=_positive, default=100, help="final test episodes (default 100)")
     report.add_argument(
         "--output",
@@ -688,6 +725,13 @@ def _add_evaluate_command(commands) -> None:
         "--epochs", type=_non_negative, help="--policy: epochs (250 steps) trained, recorded"
     )
     evaluate.add_argument("--no-sentences", action="store_true", help="alphabet tasks: skip the sentences")
+    evaluate.add_argument(
+        "--world",
+        action="append",
+        metavar="WORLD",
+        help="RUN_DIR: also type in WORLD (render, frame:DX,DY,DEG, sensor:NAME, or transfer for the suite); "
+        "writes transfer.json, leaves typing.json (repeatable; docs/evaluation.md)",
+    )
     evaluate.add_argument(
         "--seed", type=int, default=0, help="seed of the start poses (part of the fingerprint)"
     )

@@ -118,7 +118,15 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
-RECORD_FILES = ("config.json", "world.json", "progress.csv", "typing.json", "result.json", "touch.json")
+RECORD_FILES = (
+    "config.json",
+    "world.json",
+    "progress.csv",
+    "typing.json",
+    "result.json",
+    "touch.json",
+    "transfer.json",
+)
 """What a run's archived record holds: everything a report reads, no checkpoint or replay."""
 
 

@@ -53,7 +53,14 @@ from tactile_braille.agents.report import evaluate_run, load_run
 from tactile_braille.agents.run import setting_differences
 from tactile_braille.agents.touch import TouchAgent
 from tactile_braille.evaluation.results import read_result
-from tactile_braille.evaluation.runs import LEGACY_VERSION, RESULT_FILE, evaluate_typing, run_result
+from tactile_braille.evaluation.runs import (
+    LEGACY_VERSION,
+    RESULT_FILE,
+    TRANSFER_FILE,
+    evaluate_transfer,
+    evaluate_typing,
+    run_result,
+)
 from tactile_braille.keyboard.layout import ARROW_KEYS, KeyboardLayout
 from tactile_braille.supervised.touch import KeyLocator, TouchEncoder, TouchEncoderConfig, fit_touch_encoder
 
@@ -721,6 +728,24 @@ def test_report_and_typing_evaluate_a_touch_run_on_images(touch_runs, algo):
     assert {k: derived["report"][k] for k in ("accuracy", "total_steps", "confusion", "touch_optimum")} == {
         k: result["report"][k] for k in ("accuracy", "total_steps", "confusion", "touch_optimum")
     }
+
+
+def test_transfer_evaluation_types_in_another_world_and_keeps_the_others(touch_runs):
+    run, _, _ = touch_runs["sac"]
+    typing = evaluate_typing(run, sentences=False)
+    with pytest.raises(ValueError, match="unknown world 'grid'"):
+        evaluate_transfer(run, ["frame:+1,0,+2", "grid"])
+    assert not (run / TRANSFER_FILE).exists()  # refused before anything ran
+    # An earlier evaluation of the same checkpoint in another world stays in the file.
+    earlier = {"checkpoint_epoch": 0, "typing_seed": 0, "worlds": {"render": {"accuracy": 0.5}}}
+    (run / TRANSFER_FILE).write_text(json.dumps(earlier))
+    output = evaluate_transfer(run, ["frame:+1,0,+2"])
+    assert output == json.loads((run / TRANSFER_FILE).read_text())
+    assert output["worlds"]["render"] == {"accuracy": 0.5}
+    scored = output["worlds"]["frame:+1,0,+2"]
+    assert scored["keys_asked"] == 96 and 0.0 <= scored["accuracy"] <= 1.0
+    assert scored["world"]["backend"] == "rig" and scored["world"]["work_frame_error"]["rotation_deg"] == 2.0
+    assert scored["fingerprint"] != typing["fingerprint"]  # another world, another score
 
 
 # ---------------------------------------------------------------- asymmetric critics, placed goals, readout

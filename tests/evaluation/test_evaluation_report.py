@@ -18,6 +18,7 @@ from tactile_braille.evaluation.report import (
     load_records,
     original_curves,
     results_table,
+    transfer_table,
     write_report,
 )
 
@@ -89,6 +90,29 @@ def test_runs_of_two_tracks_are_tabled_apart_under_their_tracks():
     assert "| DQN (paper, fp32) | tactile |" in tactile
     assert "proprio" not in tactile.split("\n", 1)[1]  # nothing but the heading names the other track
     assert "| DQN (fast, fp32) | proprio |" in proprio
+
+
+def test_transfer_table_shows_each_world_beside_the_world_learnt_in():
+    records = [record("ContinuousAlphabet-v0", "sac", seed, [0.5, 1.0], accuracy, 900) for seed, accuracy
+               in ((0, 1.0), (1, 0.9), (2, 0.95))]  # fmt: skip
+    for r, (render, frame) in zip(records[:2], ((0.9, 0.5), (0.8, 0.7)), strict=True):
+        r.transfer = {"worlds": {"render": {"accuracy": render}, "frame:+1,0,+2": {"accuracy": frame},
+                                 "frame:+3,0,0": {"accuracy": 0.1}}}  # fmt: skip
+    header, _, row = transfer_table(group(records)).splitlines()
+    assert header.startswith(
+        "| task | algo | track | seeds | learnt in (dataset) | `render` | `frame:+1,0,+2` |"
+    )
+    assert header.endswith("| `sensor:tactip_127` | `frame:+3,0,0` |")  # the suite first, then others
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    assert cells[:5] == [
+        "ContinuousAlphabet-v0",
+        "SAC",
+        "tactile",
+        "2",
+        "0.950 [0.900, 1.000]",
+    ]  # seed 2: none
+    assert cells[5:7] == ["0.850 [0.800, 0.900]", "0.600 [0.500, 0.700]"]
+    assert cells[-2:] == ["-", "0.100 [0.100, 0.100]"]
 
 
 def test_original_curves_are_vendored():

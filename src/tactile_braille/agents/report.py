@@ -43,16 +43,16 @@ def convergence_epoch(
     return int(reached[0]) + 1 if reached.size else None
 
 
-def load_run(run_dir: str | Path, **env_options):
-    """The run's config, a fresh environment (``gym.make`` options in ``env_options``), and its agent
-    restored from the last checkpoint."""
+def load_run(run_dir: str | Path, env=None, **env_options):
+    """The run's config, a fresh environment (``gym.make`` options in ``env_options``; or ``env``, one
+    of the task made elsewhere), and its agent restored from the last checkpoint."""
     run_dir = Path(run_dir)
     config = read_config(run_dir)
     checkpoint = run_dir / CHECKPOINT_FILE
     if not checkpoint.exists():
         raise FileNotFoundError(f"{run_dir} has no checkpoint yet")
     torch.set_num_threads(config.threads)
-    env = make_env(config, **env_options)
+    env = env if env is not None else make_env(config, **env_options)
     agent = make_agent(config, env)
     agent.load_state_dict(torch.load(checkpoint, weights_only=False, map_location=agent.device)["agent"])
     return config, env, agent

@@ -95,6 +95,8 @@ class RunRecord:
     world: str | None = GENERATOR_VERSION
     """The generator version (or the real rig) of the world the run learned in; ``None`` where
     the run predates ``world.json`` (a world before ``0.1.0+samples3``)."""
+    transfer: dict | None = None
+    """``transfer.json``: typing of the last checkpoint in other worlds (None if never, or stale)."""
 
     @property
     def variant(self) -> str:
@@ -149,10 +151,14 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
         if typing is None and evaluate_missing and (run_dir / "checkpoint.pt").exists():
             typing = evaluate_typing(run_dir)
         world = run_world(run_dir)
+        transfer_file = run_dir / "transfer.json"
+        transfer = json.loads(transfer_file.read_text()) if transfer_file.exists() else None
+        if transfer is not None and transfer.get("checkpoint_epoch") != last_epoch:
+            transfer = None  # typed before the run went on: stale
         records.append(RunRecord(
             path=run_dir, task=task_name(config.task), algo=config.algo, seed=config.seed,
             returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
-            seconds=float(np.nansum([row.get("time_s", np.nan) for row in rows])),
+            seconds=float(np.nansum([row.get("time_s", np.nan) for row in rows])), transfer=transfer,
             world=(GENERATOR_VERSION if task_of(config.task) is None else None)
             if world is None else world.get("generator_version", world.get("rig")),
         ))  # fmt: skip
@@ -270,6 +276,36 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
             f"| {len(records)} | {steps} | {bound} | {accuracy} | {reset_steps} | {reset_bound} "
             f"| {reset_accuracy} | {convergence} "
             f"| {reached_text} | " + " | ".join(paper_cells) + " |"
+        )
+    return "\n".join(lines)
+
+
+def transfer_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
+    """Typing accuracy (mean [95 % CI] over seeds) in the world each run learnt in and in the transfer
+    worlds (:mod:`~tactile_braille.evaluation.worlds`), a row per group of runs that typed in them."""
+    from tactile_braille.evaluation.worlds import TRANSFER_SUITE
+
+    worlds = list(TRANSFER_SUITE)
+    for record in (r for records in groups.values() for r in records if r.transfer):
+        worlds += [w for w in record.transfer["worlds"] if w not in worlds]
+    lines = [
+        "| task | algo | track | seeds | learnt in (dataset) | "
+        + " | ".join(f"`{w}`" for w in worlds)
+        + " |",
+        "|---|---|---|---|---|" + "---|" * len(worlds),
+    ]
+    for (task, algo, variant), records in groups.items():
+        moved = [r for r in records if r.transfer]
+        if not moved:
+            continue
+        home = _stat([r.typing["accuracy"] for r in moved if r.typing], 3)
+        cells = [_stat([r.transfer["worlds"][w]["accuracy"] for r in moved if w in r.transfer["worlds"]], 3)
+                 for w in worlds]  # fmt: skip
+        track = moved[0].track
+        lines.append(
+            f"| {task} | {_label(algo, variant)} | {track} | {len(moved)} | {home} | "
+            + " | ".join(cells)
+            + " |"
         )
     return "\n".join(lines)
 
@@ -399,7 +435,12 @@ def _run_line(record: RunRecord) -> str:
 
 
 def write_report(
-    run_dirs, output: str | Path, title: str = "Results", notes: str | None = None, command: str | None = None
+    run_dirs,
+    output: str | Path,
+    title: str = "Results",
+    notes: str | None = None,
+    command: str | None = None,
+    transfer_dirs=(),
 ) -> Path:
     """Evaluate the runs and write the report with its figures; returns its path.
 
@@ -412,6 +453,8 @@ def write_report(
         title: the report's title.
         notes: Markdown placed after the table (a reading of the results).
         command: the command that made the report, quoted in it.
+        transfer_dirs: runs whose typing in other worlds (``transfer.json``)
+            is tabled in a section of its own; their other figures are not.
     """
     from tactile_braille.evaluation.runs import save_typing_confusion
 
@@ -441,6 +484,19 @@ def write_report(
         "", results_table(groups), "", *([notes.strip(), ""] if notes else []),
         f"![training curves]({link}curves.png)", "",
     ]  # fmt: skip
+    moved = group(load_records(transfer_dirs, evaluate_missing=False)) if transfer_dirs else {}
+    if any(r.transfer for records in moved.values() for r in records):
+        listed = [
+            f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs" for rs in moved.values() for r in rs
+        ]
+        lines += [
+            "## Transfer: typing in worlds the policies did not learn in", "",
+            "Runs of their own (listed below the table), trained on the dataset backend and typed "
+            "(`tactile-braille evaluate RUN --world transfer`, the paper's protocol) in the live renderer "
+            "(`render`), in it with the work frame off by 1 mm and 2 degrees (`frame:DX,DY,DEG`), and "
+            "with the other TacTip (`sensor:tactip_127`); docs/evaluation.md says what this does and "
+            "does not show.", "", transfer_table(moved), "", *listed, "",
+        ]  # fmt: skip
     for (task, algo, variant), records in groups.items():
         name = f"{task.split('-')[0]}__{algo}" + (
             f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""

@@ -4,7 +4,10 @@
 :func:`~tactile_braille.evaluation.scoring.evaluate_policy` (the function any
 other agent goes through) under both protocols and writes
 ``RUN_DIR/typing.json`` (what reports read), ``RUN_DIR/result.json`` (the
-benchmark's results file) and ``RUN_DIR/typing_confusion.png``.
+benchmark's results file) and ``RUN_DIR/typing_confusion.png``;
+``evaluate_transfer(RUN_DIR, worlds)`` types in other worlds (the live
+renderer, a calibration error, another sensor: :mod:`.worlds`) and writes
+``RUN_DIR/transfer.json``.
 :func:`run_result` reads a run's results file, or makes it from a record
 archived before results files existed.
 """
@@ -31,6 +34,7 @@ from tactile_braille.evaluation.scoring import (
 )
 
 RESULT_FILE = "result.json"
+TRANSFER_FILE = "transfer.json"
 LEGACY_VERSION = "0.1.0"
 """The project's version when typing.json held no fingerprint (every record before results files)."""
 
@@ -72,6 +76,39 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
     result = make_result(report, method=run_method(config), seed=config.seed, epochs=epoch + 1,
                          env_steps=env_steps)  # fmt: skip
     write_result(result, run_dir / RESULT_FILE, overwrite=True)
+    return output
+
+
+def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
+    """The typing evaluation of a run's last checkpoint in other worlds (:mod:`.worlds`); returns
+    ``RUN_DIR/transfer.json``'s content, which keeps the other worlds' entries of the same checkpoint."""
+    import torch
+
+    from tactile_braille.agents.report import load_run
+    from tactile_braille.evaluation.worlds import expand_worlds
+
+    run_dir = Path(run_dir)
+    chosen = expand_worlds(worlds)  # a mistyped world is refused before anything runs
+    config = read_config(run_dir)
+    if task_of(config.task) is None:
+        raise ValueError(f"{run_dir} trained on {config.task}, which has no keyboard to transfer to")
+    state = torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")
+    epoch = int(state["epoch"])
+    path = run_dir / TRANSFER_FILE
+    output = json.loads(path.read_text()) if path.exists() else {}
+    if output.get("checkpoint_epoch") != epoch or output.get("typing_seed") != seed:
+        output = {"task": config.task, "algo": config.algo, "seed": config.seed, "checkpoint_epoch": epoch,
+                  "typing_seed": seed, "worlds": {}}  # fmt: skip
+    sensor = (run_world(run_dir) or {}).get("sensor", {}).get("name", "braille_331")
+    options = {"max_episode_steps": config.max_episode_steps} if config.max_episode_steps else {}
+    for world in chosen:
+        env = world.make_env(config.task, sensor, proprio=bool(config.touch.pose_inputs), **options)
+        _, env, agent = load_run(run_dir, env=env)
+        report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=False)
+        output["worlds"][world.name] = {**_summary(report), "fingerprint": report.fingerprint,
+                                        "world": report.conditions["world"]}  # fmt: skip
+        with atomic_path(path) as temporary:  # after each world: a long evaluation keeps what it scored
+            temporary.write_text(json.dumps(output, indent=2))
     return output
 
 
