@@ -192,6 +192,17 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
         and "](results/confusion_DiscreteArrows__dqn__custom_fp32_tactile-track.png)" in text
     )
     assert "`make it`" in text
+    assert "## Transfer" not in text  # no run typed in other worlds
+    # Runs typed in other worlds (transfer.json of their last checkpoint) get a section of their own.
+    worlds = {"render": {"accuracy": 0.25}, "sensor:tactip_127": {"accuracy": 0.0}}
+    (runs[0] / "transfer.json").write_text(json.dumps({"checkpoint_epoch": 2, "worlds": worlds}))
+    (runs[1] / "transfer.json").write_text(json.dumps({"checkpoint_epoch": 1, "worlds": worlds}))  # stale
+    moved = write_report(runs, tmp_path / "moved.md", transfer_dirs=runs).read_text()
+    section = moved.split("## Transfer: typing in worlds the policies did not learn in")[1]
+    row = section.split("\n| DiscreteArrows-v0 |")[1].split("\n")[0]
+    assert (
+        row.startswith(" DQN (custom, fp32, tactile track) | tactile | 1 |") and "| 0.250 (one run) |" in row
+    )
     assert (
         text.index("| sim | disc arrow |")
         < text.index("Reading: **fine**.")

@@ -310,6 +310,22 @@ def transfer_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     return "\n".join(lines)
 
 
+def _transfer_section(transfer_dirs) -> list[str]:
+    """The report's lines on the runs typed in other worlds (none without such runs)."""
+    moved = group(load_records(transfer_dirs, evaluate_missing=False)) if transfer_dirs else {}
+    if not any(r.transfer for records in moved.values() for r in records):
+        return []
+    listed = [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs" for rs in moved.values() for r in rs]
+    return [
+        "## Transfer: typing in worlds the policies did not learn in", "",
+        "Runs of their own (listed below the table), trained on the dataset backend and typed "
+        "(`tactile-braille evaluate RUN --world transfer`, the paper's protocol) in the live renderer "
+        "(`render`), in it with the work frame off by 1 mm and 2 degrees (`frame:DX,DY,DEG`), and "
+        "with the other TacTip (`sensor:tactip_127`); docs/evaluation.md says what this does and "
+        "does not show.", "", transfer_table(moved), "", *listed, "",
+    ]  # fmt: skip
+
+
 def _bound(record: RunRecord, protocol: str) -> float | None:
     """The typing bound of a record's evaluation (:mod:`~tactile_braille.evaluation.bounds`): as its
     typing.json recorded it, or computed for records evaluated before bounds existed (in the default
@@ -484,19 +500,7 @@ def write_report(
         "", results_table(groups), "", *([notes.strip(), ""] if notes else []),
         f"![training curves]({link}curves.png)", "",
     ]  # fmt: skip
-    moved = group(load_records(transfer_dirs, evaluate_missing=False)) if transfer_dirs else {}
-    if any(r.transfer for records in moved.values() for r in records):
-        listed = [
-            f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs" for rs in moved.values() for r in rs
-        ]
-        lines += [
-            "## Transfer: typing in worlds the policies did not learn in", "",
-            "Runs of their own (listed below the table), trained on the dataset backend and typed "
-            "(`tactile-braille evaluate RUN --world transfer`, the paper's protocol) in the live renderer "
-            "(`render`), in it with the work frame off by 1 mm and 2 degrees (`frame:DX,DY,DEG`), and "
-            "with the other TacTip (`sensor:tactip_127`); docs/evaluation.md says what this does and "
-            "does not show.", "", transfer_table(moved), "", *listed, "",
-        ]  # fmt: skip
+    lines += _transfer_section(transfer_dirs)
     for (task, algo, variant), records in groups.items():
         name = f"{task.split('-')[0]}__{algo}" + (
             f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""
