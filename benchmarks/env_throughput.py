@@ -2,9 +2,10 @@
 
 Single environments are made with ``gym.make`` (with the registry's wrappers)
 and driven by random actions, resetting at episode ends; the vectorised
-environment steps 64 dataset-backend environments at once. Targets on one
-core: dataset backend >= 20,000 steps/s single and >= 200,000 steps/s
-vectorised; render backend >= 1,000 steps/s.
+environment steps 64 dataset-backend environments at once, and 64 render-backend
+ones with the batched renderer on the CPU (``render_device="cpu"``) and tap by
+tap (``render_device=None``). Targets on one core: dataset backend >= 20,000
+steps/s single and >= 200,000 steps/s vectorised; render backend >= 1,000 steps/s.
 
     python benchmarks/env_throughput.py [--seconds 2]
 """
@@ -19,6 +20,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import cv2
 import gymnasium as gym
+import torch
 
 import tactile_braille
 from tactile_braille.envs import ENV_IDS
@@ -40,8 +42,8 @@ def single_rate(env_id: str, backend: str, seconds: float) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def vector_rate(env_id: str, num_envs: int, seconds: float) -> float:
-    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point")
+def vector_rate(env_id: str, num_envs: int, seconds: float, **options) -> float:
+    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **options)
     envs.reset(seed=0)
     envs.action_space.seed(0)
     batches = [envs.action_space.sample() for _ in range(64)]
@@ -60,12 +62,17 @@ def main() -> None:
     args = parser.parse_args()
     cv2.setNumThreads(1)
     print(f"tactile_braille {tactile_braille.__version__}, one core, random actions, steps per second")
-    print(f"{'environment':40s} {'dataset':>10s} {'render':>10s} {f'vector x{args.num_envs}':>12s}")
+    torch.set_num_threads(1)
+    vector = f"vector x{args.num_envs}"
+    print(f"{'environment':40s} {'dataset':>10s} {'render':>10s} {vector:>12s} "
+          f"{'render ' + vector + ' batched':>24s} {'tap by tap':>12s}")  # fmt: skip
     for env_id in ENV_IDS:
         dataset = single_rate(env_id, "dataset", args.seconds)
         render = single_rate(env_id, "render", args.seconds)
-        vector = vector_rate(env_id, args.num_envs, args.seconds)
-        print(f"{env_id:40s} {dataset:10.0f} {render:10.0f} {vector:12.0f}")
+        batch = vector_rate(env_id, args.num_envs, args.seconds)
+        batched = vector_rate(env_id, args.num_envs, args.seconds, backend="render", render_device="cpu")
+        tapped = vector_rate(env_id, args.num_envs, args.seconds, backend="render", render_device=None)
+        print(f"{env_id:40s} {dataset:10.0f} {render:10.0f} {batch:12.0f} {batched:24.0f} {tapped:12.0f}")
     print("targets: dataset >= 20,000; render >= 1,000; vector >= 200,000")
 
 
