@@ -729,8 +729,8 @@ def _add_evaluate_command(commands) -> None:
         "--world",
         action="append",
         metavar="WORLD",
-        help="RUN_DIR: also type in WORLD (render, frame:DX,DY,DEG, sensor:NAME, or transfer for the suite); "
-        "writes transfer.json, leaves typing.json (repeatable; docs/evaluation.md)",
+        help="RUN_DIR: type in WORLD instead (render, frame:DX,DY,DEG, sensor:NAME, or transfer for the "
+        "suite; no sentences); writes transfer.json, leaves typing.json (repeatable; docs/evaluation.md)",
     )
     evaluate.add_argument(
         "--seed", type=int, default=0, help="seed of the start poses (part of the fingerprint)"

@@ -119,6 +119,11 @@ def test_vector_env_refuses_other_backends_and_empty_batches(make_vec):
         make_vec("tactile_braille/DiscreteArrows-v0", backend="render")
     with pytest.raises(ValueError, match="num_envs"):
         make_vec("tactile_braille/DiscreteArrows-v0", num_envs=0)
+    with pytest.raises(ValueError, match="render_device is for the render backend"):
+        make_vec("tactile_braille/DiscreteArrows-v0", render_device="cpu")
+    with pytest.raises(ValueError, match="'gpu0' is not a torch device"):
+        gym.make_vec("tactile_braille/DiscreteArrows-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                     backend="render", render_device="gpu0")  # fmt: skip
 
 
 @pytest.mark.parametrize(

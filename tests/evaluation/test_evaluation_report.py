@@ -99,9 +99,7 @@ def test_transfer_table_shows_each_world_beside_the_world_learnt_in():
         r.transfer = {"worlds": {"render": {"accuracy": render}, "frame:+1,0,+2": {"accuracy": frame},
                                  "frame:+3,0,0": {"accuracy": 0.1}}}  # fmt: skip
     header, _, row = transfer_table(group(records)).splitlines()
-    assert header.startswith(
-        "| task | algo | track | seeds | learnt in (dataset) | `render` | `frame:+1,0,+2` |"
-    )
+    assert header.startswith("| task | algo | track | seeds | where it learnt | `render` | `frame:+1,0,+2` |")
     assert header.endswith("| `sensor:tactip_127` | `frame:+3,0,0` |")  # the suite first, then others
     cells = [c.strip() for c in row.split("|")[1:-1]]
     assert cells[:5] == [

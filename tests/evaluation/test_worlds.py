@@ -11,7 +11,8 @@ from tactile_braille.evaluation.worlds import TRANSFER_SUITE, World, expand_worl
 def test_worlds_are_parsed_from_their_names():
     assert parse_world("render") == World("render")
     assert parse_world("sensor:tactip_127") == World("sensor:tactip_127", sensor="tactip_127")
-    assert parse_world("frame:+1,-0.5,2") == World("frame:+1,-0.5,2", offset_mm=(1.0, -0.5), rotation_deg=2.0)
+    assert parse_world("frame:1,-0.5,2") == World("frame:+1,-0.5,+2", offset_mm=(1.0, -0.5), rotation_deg=2.0)
+    assert parse_world("frame:+0,1.0,-2").name == "frame:0,+1,-2"  # one name per world
     for bad, message in (
         ("frame:1,2", "frame:DX,DY,DEG"),
         ("frame:a,b,c", "frame:DX,DY,DEG"),
@@ -23,7 +24,7 @@ def test_worlds_are_parsed_from_their_names():
 
 
 def test_the_transfer_suite_expands_once_in_order():
-    worlds = expand_worlds(["render", "transfer", "frame:+1,0,+2"])
+    worlds = expand_worlds(["render", "transfer", "frame:1,0,2"])
     assert [w.name for w in worlds] == list(TRANSFER_SUITE)
     assert sum(w.offset_mm != (0.0, 0.0) for w in worlds) == 4 and {abs(w.rotation_deg) for w in worlds} == {
         0,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+import torch
 
 from tactile_braille.keyboard.layout import ALPHABET_KEYS, ARROW_KEYS
 from tactile_braille.rigs.base import OutOfWorkspaceError
@@ -138,8 +139,10 @@ def test_bad_batches_are_refused_before_rendering(rigs):
         renderer.observe(xs, ys, apex, nuisances=noisy)
     with pytest.raises(ValueError, match="all have pixel noise or all have none"):
         TapNuisances.stack([FrameNuisance(), FrameNuisance(noise_offset_px=(1, 1))])
+    pose = rig.pose
     with pytest.raises(OutOfWorkspaceError):
         rig.observe_taps([x, 1e4], [y, y], [5.0, 5.0], [0.0, 0.0], [0, 1])
+    assert rig.pose == pose
     with pytest.raises(ValueError, match="one entry per tap"):
         rig.observe_taps([x], [y], [5.0], [0.0], [0, 1])
 
@@ -155,8 +158,31 @@ def test_renderer_settings_are_checked():
         BatchedTacTip(TacTip(other), surface)
 
 
-def test_noiseless_rig_renders_noiseless_batches():
-    rig = VirtualRig(seed=None)
-    x, y = rig.layout.centre_mm("B")
-    first, _ = rig.observe_taps([x, x], [y, y], [5.0, 5.0], [0.0, 0.0], [1, 2])
-    np.testing.assert_array_equal(first[0], first[1])  # no nuisance: the seeds change nothing
+def test_noiseless_and_noisy_rigs(rigs):
+    quiet = VirtualRig(seed=None)
+    taps = random_taps(quiet, ARROW_KEYS, count=6, seed=11)
+    images, _ = quiet.observe_taps(*taps)
+    assert (images == reference_taps(quiet, *taps)[0]).mean() >= AGREEMENT["braille_331"][0]
+    # A noisy rig: the same seeds give the same images, other seeds other images.
+    rig = rigs["braille_331"]
+    again, _ = rig.observe_taps(*taps[:-1], taps[-1])
+    assert np.array_equal(again, rig.observe_taps(*taps[:-1], taps[-1])[0])
+    assert not np.array_equal(again, rig.observe_taps(*taps[:-1], taps[-1] + 1)[0])
+
+
+def test_a_rendered_frame_draws_exactly_its_nuisances():
+    """The single-tap renderer's draws are draw_nuisance's, in order (what the batched path replays)."""
+    tactip, surface = TacTip(), VirtualRig(seed=None).surface
+    rendering, drawing = np.random.default_rng(5), np.random.default_rng(5)
+    tactip.render_frame(surface, 0.0, 0.0, 5.0, 0.0, rendering)
+    tactip.draw_nuisance(drawing)
+    assert rendering.bit_generator.state == drawing.bit_generator.state
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device here")
+def test_cuda_renders_as_the_cpu(rigs):
+    rig = rigs["braille_331"]
+    taps = random_taps(rig, ALPHABET_KEYS, count=16, seed=3)
+    on_cuda, _ = rig.observe_taps(*taps, device="cuda")
+    on_cpu, _ = rig.observe_taps(*taps, device="cpu", kernels="torch")
+    assert (on_cuda == on_cpu).mean() >= 0.999

@@ -167,8 +167,8 @@ class RigBackend:
         device: render a batch's taps at once with the batched renderer on
             this torch device (``"cpu"``, ``"cuda"``; the virtual rig only).
             None taps one at a time. Both draw the same randomness, so the
-            same seed gives the same taps (images equal in at least 99 % of
-            pixels).
+            same seed gives the same taps, their images equal in 99.4 % of
+            pixels on average (each in at least 98 %).
     """
 
     name = "rig"
@@ -181,10 +181,12 @@ class RigBackend:
                 f"the environments take {OBSERVATION_SIZE_PX}x{OBSERVATION_SIZE_PX} observations; "
                 f"this rig's processing makes {rig.processing.size_px}x{rig.processing.size_px}"
             )
-        if device is not None and not hasattr(rig, "observe_taps"):
-            raise ValueError(
-                f"a {type(rig).__name__} cannot render batches; use device=None to tap one at a time"
-            )
+        if device is not None:
+            if not hasattr(rig, "observe_taps"):
+                raise ValueError(
+                    f"a {type(rig).__name__} cannot render batches; tap one at a time: device=None"
+                )
+            _check_device(device)
         self.rig = rig
         self.layout = rig.layout
         self.device = device
@@ -244,3 +246,15 @@ class RigBackend:
         """Tap at every pose; returns (images, pressed codes)."""
         seeds = [rng.integers(2**63 - 1) for _ in range(len(x_mm))]
         return self._observe(x_mm, y_mm, depth_mm, np.zeros(len(x_mm)), seeds)
+
+
+def _check_device(device: str) -> None:
+    """Refuse a torch device that is misspelt or absent here, before anything renders."""
+    import torch
+
+    try:
+        kind = torch.device(device).type
+    except RuntimeError as error:
+        raise ValueError(f"render device {device!r} is not a torch device ({error})") from None
+    if kind == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"render device {device!r}: this machine has no CUDA device; use 'cpu' or None")

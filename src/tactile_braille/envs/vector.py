@@ -5,7 +5,8 @@ vectorization_mode="vector_entry_point")`` builds one. The rules are those of
 the single environments (the same :class:`BatchedBraille` core). On the
 ``render`` backend each step renders every sub-environment's tap at once with
 the batched renderer (:mod:`tactile_braille.sensor.batched`) on
-``render_device`` (``"cuda"`` for a GPU).
+``render_device`` (by default a GPU where there is one; on a CPU each tap is
+rendered by the single-tap renderer, the faster there).
 
 Autoreset mode: ``NEXT_STEP`` (Gymnasium's default). When a sub-environment
 terminates or is truncated, the step returns its final observation; the
@@ -46,7 +47,9 @@ class VectorBrailleEnv(VectorEnv):
         proprio: observations also carry ``sensor_pose`` (the ``proprio`` track's).
         render_device: the render backend's torch device for the batched
             renderer (``"cpu"``, ``"cuda"``), or None to render each tap with
-            the single-tap reference renderer.
+            the single-tap reference renderer. ``"auto"`` (the default):
+            ``"cuda"`` where a GPU is, else None (on a CPU the single-tap
+            renderer is the faster, and it is exact).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -61,7 +64,7 @@ class VectorBrailleEnv(VectorEnv):
         max_episode_steps: int = MAX_EPISODE_STEPS,
         backend: str = "dataset",
         proprio: bool = False,
-        render_device: str | None = "cpu",
+        render_device: str | None = "auto",
     ) -> None:
         if backend not in VECTOR_BACKENDS:
             choices = " or ".join(VECTOR_BACKENDS)
@@ -71,10 +74,18 @@ class VectorBrailleEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.task = Task(keys=keys, continuous=self.continuous)
         if backend == "dataset":
+            if render_device != "auto":
+                raise ValueError(
+                    "render_device is for the render backend; the dataset backend renders nothing"
+                )
             source = DatasetBackend(self.task, dataset, sensor=sensor)
         else:
             if dataset is not None:
                 raise ValueError("the render backend renders its taps: it takes no dataset")
+            if render_device == "auto":
+                import torch
+
+                render_device = "cuda" if torch.cuda.is_available() else None
             source = RigBackend(VirtualRig(sensor=sensor), device=render_device)
         self._core = BatchedBraille(self.task, source, num_envs, proprio=proprio)
         self.single_observation_space = self._core.observation_space()

@@ -289,9 +289,7 @@ def transfer_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     for record in (r for records in groups.values() for r in records if r.transfer):
         worlds += [w for w in record.transfer["worlds"] if w not in worlds]
     lines = [
-        "| task | algo | track | seeds | learnt in (dataset) | "
-        + " | ".join(f"`{w}`" for w in worlds)
-        + " |",
+        "| task | algo | track | seeds | where it learnt | " + " | ".join(f"`{w}`" for w in worlds) + " |",
         "|---|---|---|---|---|" + "---|" * len(worlds),
     ]
     for (task, algo, variant), records in groups.items():
@@ -315,7 +313,8 @@ def _transfer_section(transfer_dirs) -> list[str]:
     moved = group(load_records(transfer_dirs, evaluate_missing=False)) if transfer_dirs else {}
     if not any(r.transfer for records in moved.values() for r in records):
         return []
-    listed = [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs" for rs in moved.values() for r in rs]
+    runs = [r for records in moved.values() for r in records if r.transfer]
+    listed = [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs" for r in runs]
     return [
         "## Transfer: typing in worlds the policies did not learn in", "",
         "Runs of their own (listed below the table), trained on the dataset backend and typed "

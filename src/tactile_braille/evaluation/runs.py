@@ -92,6 +92,8 @@ def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
     config = read_config(run_dir)
     if task_of(config.task) is None:
         raise ValueError(f"{run_dir} trained on {config.task}, which has no keyboard to transfer to")
+    if not (run_dir / "checkpoint.pt").exists():
+        raise FileNotFoundError(f"{run_dir} has no checkpoint yet: nothing to type with")
     state = torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")
     epoch = int(state["epoch"])
     path = run_dir / TRANSFER_FILE

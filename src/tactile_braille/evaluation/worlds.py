@@ -99,14 +99,13 @@ def parse_world(text: str) -> World:
             raise ValueError(
                 f"world {text!r}: a frame error is frame:DX,DY,DEG, e.g. frame:+1,0,+2"
             ) from None
-        return World(text, offset_mm=(dx, dy), rotation_deg=degrees)
+        # One name per world: frame:+1,0,+2 however it was written.
+        name = "frame:" + ",".join("0" if v == 0 else f"{v:+g}" for v in (dx, dy, degrees))
+        return World(name, offset_mm=(dx, dy), rotation_deg=degrees)
     raise ValueError(f"unknown world {text!r}; the forms are {forms}")
 
 
 def expand_worlds(names: list[str]) -> list[World]:
     """The worlds named (``transfer`` expands to :data:`TRANSFER_SUITE`), each once, in order."""
     expanded = [n for name in names for n in (TRANSFER_SUITE if name == "transfer" else (name,))]
-    worlds: dict[tuple, World] = {}
-    for world in map(parse_world, expanded):
-        worlds.setdefault((world.sensor, world.offset_mm, world.rotation_deg), world)  # the first spelling
-    return list(worlds.values())
+    return list({world.name: world for world in map(parse_world, expanded)}.values())
