@@ -131,7 +131,7 @@ def test_vector_env_refuses_other_backends_and_empty_batches(make_vec):
 )
 def test_render_backend_vector_env_renders_batches_as_the_reference_would(env_id):
     """``make_vec(..., backend="render")``: batched spaces and steps; the batched renderer's taps are the
-    single-tap renderer's (same seed: same rewards, images alike in at least 99 % of pixels)."""
+    single-tap renderer's (same seed: same rewards, images alike in over 99.2 % of pixels)."""
     runs = {}
     for device in ("cpu", None):
         vec = gym.make_vec(
@@ -157,7 +157,8 @@ def test_render_backend_vector_env_renders_batches_as_the_reference_would(env_id
         for key in reference:
             if key != "observation":
                 np.testing.assert_array_equal(batched[key], reference[key], err_msg=key)
-        assert (batched["observation"] == reference["observation"]).mean() >= 0.99
+        # Measured 0.9935-0.9974 per step; taps of other seeds agree in about 0.98.
+        assert (batched["observation"] == reference["observation"]).mean() >= 0.992
 
 
 def test_a_vector_env_refuses_a_step_before_its_first_reset(make_vec):

@@ -311,13 +311,14 @@ def transfer_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
 def _transfer_section(transfer_dirs) -> list[str]:
     """The report's lines on the runs typed in other worlds (none without such runs)."""
     moved = group(load_records(transfer_dirs, evaluate_missing=False)) if transfer_dirs else {}
-    if not any(r.transfer for records in moved.values() for r in records):
-        return []
     runs = [r for records in moved.values() for r in records if r.transfer]
+    if not runs:
+        return []
     listed = [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs" for r in runs]
     return [
         "## Transfer: typing in worlds the policies did not learn in", "",
-        "Runs of their own (listed below the table), trained on the dataset backend and typed "
+        "Runs of their own (listed below the table), trained on the dataset backend (or, where the row "
+        "says so, the render backend) and typed "
         "(`tactile-braille evaluate RUN --world transfer`, the paper's protocol) in the live renderer "
         "(`render`), in it with the work frame off by 1 mm and 2 degrees (`frame:DX,DY,DEG`), and "
         "with the other TacTip (`sensor:tactip_127`); docs/evaluation.md says what this does and "

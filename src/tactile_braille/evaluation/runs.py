@@ -103,9 +103,11 @@ def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
                   "typing_seed": seed, "worlds": {}}  # fmt: skip
     sensor = (run_world(run_dir) or {}).get("sensor", {}).get("name", "braille_331")
     options = {"max_episode_steps": config.max_episode_steps} if config.max_episode_steps else {}
+    agent = None
     for world in chosen:
         env = world.make_env(config.task, sensor, proprio=bool(config.touch.pose_inputs), **options)
-        _, env, agent = load_run(run_dir, env=env)
+        if agent is None:  # the checkpoint once: every world has the task's spaces and layout
+            _, _, agent = load_run(run_dir, env=env)
         report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=False)
         output["worlds"][world.name] = {**_summary(report), "fingerprint": report.fingerprint,
                                         "world": report.conditions["world"]}  # fmt: skip

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from tactile_braille.sensor.config import TacTipConfig
-from tactile_braille.sensor.tactip import TacTip
+from tactile_braille.sensor.tactip import SUBPIXEL_BITS, TacTip
 
 AREA_FACTOR = 4
 """The crop (400 px) is area-resized to the observation (100 px) by this factor."""
@@ -27,8 +27,6 @@ FILTER = np.convolve(np.ones(3), np.ones(AREA_FACTOR))
 """One axis of the 3 x 3 box blur then the 4 x 4 area mean: weights 1 2 3 3 2 1 over 6 pixels."""
 FILTER_SUM = float(FILTER.sum() ** 2)
 """The 2-D filter's weights add up to 144: a fully lit observation pixel."""
-SUBPIXEL_BITS = 4
-"""The reference fills polygons on a 1/16-pixel grid (OpenCV's ``shift``)."""
 
 
 class MarkerTables(NamedTuple):

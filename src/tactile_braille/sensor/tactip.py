@@ -37,7 +37,8 @@ from tactile_braille.sensor.config import TacTipConfig
 from tactile_braille.sensor.processing import process_frame
 
 _ELLIPSE_VERTICES = 6
-_SUBPIXEL_BITS = 4
+SUBPIXEL_BITS = 4
+"""Markers are filled on a 1/16-pixel grid (OpenCV's ``shift``)."""
 NOISE_BANK_MARGIN_PX = 64
 
 
@@ -314,9 +315,9 @@ class TacTip:
         cx, cy = config.image_centre_px
         centres = np.stack([cx - scale * positions_mm[:, 1], cy + scale * positions_mm[:, 0]], axis=-1)
         vertices = centres[:, None, :] + self._pin_outline_px
-        polygons = np.rint(vertices * (1 << _SUBPIXEL_BITS)).astype(np.int32)
+        polygons = np.rint(vertices * (1 << SUBPIXEL_BITS)).astype(np.int32)
         level = int(min(config.pin_level * gain, 255))
-        cv2.fillPoly(frame, polygons, level, lineType=cv2.LINE_8, shift=_SUBPIXEL_BITS)
+        cv2.fillPoly(frame, polygons, level, lineType=cv2.LINE_8, shift=SUBPIXEL_BITS)
         # The lens's blur, over the dome's bounding box only (the rest is flat).
         x0, y0, x1, y1 = self._dome_box_px
         roi = frame[y0:y1, x0:x1]
