@@ -58,14 +58,17 @@ bench: $(STAMP)
 # (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md).
 # results/tuning/ holds the runs settings were chosen on (their seeds are not reported): left out here.
 # results/transfer/ holds runs typed in other worlds (evaluate --world): their own section.
+# results/warm-start/ holds warm starts (train --init-from) and their sources: their own section too.
 ALL_RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json))))
-RECORDS = $(filter-out results/tuning/% results/transfer/%,$(ALL_RECORDS))
+RECORDS = $(filter-out results/tuning/% results/transfer/% results/warm-start/%,$(ALL_RECORDS))
 TRANSFER = $(filter results/transfer/%,$(ALL_RECORDS))
+WARM = $(filter results/warm-start/%,$(ALL_RECORDS))
 # results/ablation-*/ hold ablations (a preset with one part taken away): tabled, not ranked.
 RANKED = $(filter-out results/ablation-%,$(RECORDS))
 RESULT_FILES = $(sort $(wildcard results/leaderboard/*/*.json))
 results: $(STAMP)
 	$(TB) report $(RECORDS) --output docs/results.md $(if $(TRANSFER),--transfer $(TRANSFER)) \
+		$(if $(WARM),--warm-start $(WARM)) \
 		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
 	$(TB) leaderboard $(RANKED) $(RESULT_FILES) --output docs/leaderboard.md \
 		--title "Leaderboard: typing on the braille keyboard"

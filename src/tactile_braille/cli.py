@@ -385,6 +385,7 @@ def _report(args: argparse.Namespace) -> int:
             notes=notes,
             command=command,
             transfer_dirs=args.transfer,
+            warm_dirs=args.warm_start,
         )
         print(results.read_text().split("![training curves]")[0])
         print(f"wrote {results} and its figures")
@@ -674,6 +675,10 @@ def _add_report_command(commands) -> None:
         metavar="RUN_DIR",
         help="--output: runs whose transfer.json (evaluate --world) gets a section of its own",
     )
+    report.add_argument(
+        "--warm-start", nargs="+", type=Path, default=(), metavar="RUN_DIR",
+        help="--output: warm-started runs (train --init-from) and their sources: a section of their own",
+    )  # fmt: skip
     report.add_argument("--episodes", type=_positive, default=100, help="final test episodes (default 100)")
     report.add_argument(
         "--output",

@@ -126,6 +126,7 @@ RECORD_FILES = (
     "result.json",
     "touch.json",
     "transfer.json",
+    "init.json",
 )
 """What a run's archived record holds: everything a report reads, no checkpoint or replay."""
 

@@ -11,7 +11,7 @@ import pytest
 from conftest_datasets import FaultyRig, assert_same_arrays, cache_module, collect, collect_module
 from tactile_braille.datasets.cache import data_dir, default_dataset, default_dataset_path
 from tactile_braille.datasets.procedures import PerturbedTaps
-from tactile_braille.datasets.store import load_dataset
+from tactile_braille.datasets.store import DatasetError, load_dataset
 from tactile_braille.rigs.base import RigError
 from tactile_braille.rigs.virtual import VirtualRig
 
@@ -64,7 +64,7 @@ def test_unknown_name_raises_value_error_listing_names(cache):
 
 def test_the_papers_datasets_are_registered():
     names = sorted(cache_module.DEFAULT_DATASETS)
-    assert names == ["grid-alphabet", "grid-arrows", "keys-train", "keys-validation"]
+    assert names == ["grid-alphabet", "grid-alphabet-6mm", "grid-arrows", "keys-train", "keys-validation"]
     assert len(cache_module.DEFAULT_DATASETS["keys-train"]) == 3200
     assert len(cache_module.DEFAULT_DATASETS["keys-validation"]) == 1600
 
@@ -193,3 +193,15 @@ def test_stale_interrupted_generation_is_regenerated(cache, monkeypatch, capsys)
     assert len(dataset) == len(TINY)
     np.testing.assert_array_equal(dataset.tap_index, np.arange(len(TINY)))
     assert not partial.exists()
+
+
+def test_an_environment_takes_a_default_dataset_by_name(cache):
+    import gymnasium as gym
+
+    import tactile_braille  # noqa: F401 - registers the environments
+
+    env = gym.make("tactile_braille/DiscreteArrows-v0", dataset="tiny")  # generated on first use
+    assert env.unwrapped.world["dataset"] == str(default_dataset_path("tiny"))
+    assert env.unwrapped.world["procedure"]["per_key"] == TINY.per_key == 2
+    with pytest.raises(DatasetError, match=r"no dataset at tinny: give a dataset file or .* name \(tiny\)"):
+        gym.make("tactile_braille/DiscreteArrows-v0", dataset="tinny")

@@ -8,17 +8,20 @@ import numpy as np
 import pytest
 
 from tactile_braille.agents import TrainConfig, train
+from tactile_braille.agents.config import replace_settings
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
     bootstrap_ci,
+    grid_label,
     group,
     iqm,
     load_records,
     original_curves,
     results_table,
     transfer_table,
+    warm_start_table,
     write_report,
 )
 
@@ -201,8 +204,58 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     assert (
         row.startswith(" DQN (custom, fp32, tactile track) | tactile | 1 |") and "| 0.250 (one run) |" in row
     )
+    # A warm start (init.json) gets a section of its own, beside its settings from scratch, with a figure.
+    source = {"run": str(runs[0]), "epochs": 4, "test_returns": [0.0, 0.5, 0.96, 1.0], "world": None}
+    (runs[1] / "init.json").write_text(json.dumps(source))
+    warm = write_report(runs[:1], tmp_path / "warm.md", warm_dirs=runs).read_text()
+    row = warm.split("## Warm starts")[1].split("\n| disc arrow | ")[1].split("\n")[0]
+    assert row.startswith("DQN (custom, fp32, tactile track) | tactile | 1 | 4 epochs, default dataset | 3.0 ")
+    assert "| (1) " in row and "](warm/warm_starts.png)" in warm
+    assert (tmp_path / "warm" / "warm_starts.png").read_bytes()[:4] == b"\x89PNG"
     assert (
         text.index("| sim | disc arrow |")
         < text.index("Reading: **fine**.")
         < text.index("![training curves]")
     )
+
+
+GRID_6MM = {"procedure": {"procedure": "grid", "keys": "alphabet", "spacing_mm": 6.0, "depth_step_mm": 1.0}}
+
+
+def test_grid_label_names_only_a_grid_other_than_the_tasks():
+    assert grid_label(GRID_6MM) == "6 mm grid"
+    deeper = {"procedure": {**GRID_6MM["procedure"], "depth_step_mm": 2.0}}
+    assert grid_label(deeper) == "6 mm grid (2 mm depth steps)"
+    paper = {"procedure": {**GRID_6MM["procedure"], "spacing_mm": 3.0}}
+    assert grid_label(paper) is None and grid_label(None) is None
+    assert grid_label({"procedure": {"procedure": "perturbed", "keys": "all"}}) is None
+
+
+def test_a_warm_start_is_tabled_beside_the_same_settings_from_scratch():
+    task = "ContinuousAlphabet-v0"
+    config = preset_config("fast", f"tactile_braille/{task}", "sac")
+    warm_config = replace_settings(config, {"init_from": "runs/pre"})
+
+    def run(seed, returns, accuracy, init=None):
+        typing = {"accuracy": accuracy, "total_steps": 1000}
+        return RunRecord(path=f"runs/{seed}", task=task, algo="sac", seed=seed, returns=np.array(returns),
+                         typing=typing, config=warm_config if init else config, init=init)  # fmt: skip
+
+    def init(returns):
+        return {"run": "runs/pre", "epochs": 15, "test_returns": returns, "world": GRID_6MM}
+
+    cold = group([run(0, [0.1, 0.5, 0.96, 1.0], 0.9), run(1, [0.1, 0.5, 0.9, 0.97], 0.8)])
+    warm = group([
+        run(0, [0.97, 1.0], 1.0, init([0.2, 0.96])), run(1, [0.5, 0.96], 0.96, init([0.2, 0.5])),
+    ])  # fmt: skip
+    [(key, records)] = warm.items()
+    assert key == (task, "sac", "fast, fp32, warm start: 15 epochs on the 6 mm grid")
+    assert records[0].cold_variant == "fast, fp32" and (task, "sac", "fast, fp32") in cold
+    row = warm_start_table(warm, cold).splitlines()[2].split(" | ")
+    assert row[1:5] == ["SAC (fast, fp32)", "proprio", "2", "15 epochs, 6 mm grid"]
+    assert row[5] == "1/2 reached; 2.0 (one run)"  # the pretraining's own first epoch at 0.95
+    assert row[6].startswith("1.5 [1.0, 2.0]")  # epochs 1 and 2 after the warm start
+    assert row[7].startswith("(2) 3.5 [3.0, 4.0]")  # from scratch: epochs 3 and 4
+    assert row[8].startswith("16.5 [16.0, 17.0]")  # 15 pretraining epochs each
+    assert row[9].startswith("0.980") and row[9].endswith("after 2 epochs")
+    assert row[10].startswith("0.850") and row[10].endswith("after 4 epochs |")

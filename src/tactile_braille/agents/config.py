@@ -364,11 +364,16 @@ class TrainConfig:
             (``update_every * updates_per_step`` at a time; the released TD3 used 100).
         max_episode_steps: episode cut (None: the registry's 25).
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
-        dataset: dataset path for the dataset backend (default: the cached one).
+        dataset: dataset for the dataset backend: a path, or a default dataset's name
+            (``grid-alphabet-6mm``...; default: the task's, cached).
         device: torch device (``cpu``, ``cuda``, ``cuda:1``...).
         precision: ``fp32`` or ``bf16`` (autocast in the updates).
         threads: torch CPU threads.
         checkpoint_every: epochs between checkpoints.
+        init_from: a warm start: the run folder whose last checkpoint's agent (networks, optimisers,
+            temperature, touch encoder) this run starts from, not its replay, counters or generators
+            (``init.json`` records what was taken). Its settings must be this run's but for
+            the world, the seed, the length, the replay and the machine (``run.INIT_FREE``).
         track: the benchmark track the run competes in (docs/benchmark.md): ``tactile`` (the paper's
             rules: only the observation dictionary and the reward) or ``proprio`` (also the arm's pose
             and the calibrated key layout). A setting outside the track is refused.
@@ -394,6 +399,7 @@ class TrainConfig:
     precision: Precision = "fp32"
     threads: int = 2
     checkpoint_every: int = 1
+    init_from: str | None = None
     track: Track = "tactile"
     preset: str | None = None
     agent: AgentConfig | None = None

@@ -249,6 +249,65 @@ def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -
     return counters
 
 
+# ------------------------------------------------------------------ warm starts
+INIT_FILE = "init.json"
+"""What a warm-started run (``init_from``) took from its source run."""
+INIT_FREE = (
+    "seed", "epochs", "steps_per_epoch", "start_steps", "backend", "dataset", "device", "precision",
+    "threads", "checkpoint_every", "init_from", "preset", "replay.", "evaluation.",
+)  # fmt: skip
+"""Settings in which a warm-started run may differ from its source (names ending in a dot: a whole
+group): where it learns and for how long; the learner itself (task, algorithm, networks, touch
+encoder, hyperparameters, track) must be the source's."""
+
+
+def check_init_from(config: TrainConfig, run_dir: Path) -> None:
+    """Refuse a warm start (``config.init_from``) that cannot run, before anything is written: a source
+    that holds no run or no checkpoint, the run's own folder, or a source learner other than this one."""
+    if config.init_from is None:
+        return
+    source = Path(config.init_from)
+    if not (source / CONFIG_FILE).exists():
+        raise ValueError(f"init_from {source}: no training run there (no {CONFIG_FILE})")
+    if not (source / CHECKPOINT_FILE).exists():
+        raise ValueError(f"init_from {source}: the run has no {CHECKPOINT_FILE} to start from")
+    if source.resolve() == Path(run_dir).resolve():
+        raise ValueError(f"init_from {source} is this run's own folder: resume it instead (--resume)")
+    free = tuple(name for name in INIT_FREE if not name.endswith("."))
+    groups = tuple(name for name in INIT_FREE if name.endswith("."))
+    other = [
+        line for line in differences(read_config(source), config, ignore=free) if not line.startswith(groups)
+    ]
+    if other:
+        raise ValueError(
+            f"init_from {source} learnt with other settings ({'; '.join(other)}); a warm start may change "
+            f"only where and how long it learns ({', '.join(INIT_FREE)})"
+        )
+
+
+def warm_start(run_dir: Path, config: TrainConfig, agent) -> None:
+    """Load the source run's last checkpointed agent (:func:`check_init_from` has passed) and record
+    in ``init.json`` what was taken: its epochs, steps, test returns and world."""
+    source = Path(config.init_from)
+    path = source / CHECKPOINT_FILE
+    try:
+        state = torch.load(path, weights_only=False, map_location=agent.device)
+        agent.load_state_dict(state["agent"])
+    except Exception as error:  # torch raises many kinds on a truncated or foreign file
+        raise ValueError(
+            f"init_from {path} is unreadable ({type(error).__name__}: {str(error)[:120]})"
+        ) from None
+    epochs = int(state["epoch"]) + 1
+    record = {
+        "run": str(source), "seed": read_config(source).seed, "epochs": epochs,
+        "env_steps": int(state["env_steps"]), "updates": int(state["updates"]),
+        "test_returns": [row["test/episodic_return"] for row in read_progress(source)[:epochs]],
+        "world": run_world(source),
+    }  # fmt: skip
+    with atomic_path(run_dir / INIT_FILE) as temporary:
+        temporary.write_text(json.dumps(record, indent=2))
+
+
 def snapshot_epochs(epochs: int, snapshots: int) -> set[int]:
     """Epochs after which a policy snapshot is kept: ``snapshots`` of them, first to last."""
     if snapshots <= 0:

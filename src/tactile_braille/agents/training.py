@@ -7,7 +7,8 @@ actions for the first ``start_steps``) with bursts of updates, test the
 policy, log the epoch and checkpoint. What the files are and when they are
 written: :mod:`~tactile_braille.agents.run`. A run's extensions (the touch
 encoder) plug in through :mod:`~tactile_braille.agents.extensions`.
-``train(run_dir=..., resume=True)`` continues a run from its last checkpoint.
+``train(run_dir=..., resume=True)`` continues a run from its last checkpoint;
+a config with ``init_from`` starts a new run from another run's agent (a warm start).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from tactile_braille.agents.run import (
     LOCK_FILE,
     Counters,
     EpochLog,
+    check_init_from,
     open_run,
     read_config,
     record_world,
@@ -38,6 +40,7 @@ from tactile_braille.agents.run import (
     save_checkpoint,
     save_snapshot,
     snapshot_epochs,
+    warm_start,
     write_config,
 )
 from tactile_braille.agents.sac import SACAgent
@@ -81,6 +84,7 @@ def train(
         read_config(run_dir)  # a folder that holds no run is refused before its lock is made
     else:  # a new run's folder is made only for settings that can run
         (config or TrainConfig()).check_rig(rig)
+        check_init_from(config or TrainConfig(), run_dir)
     if config is not None:
         check_device(config.device)
     with exclusive_lock(run_dir / LOCK_FILE, f"the run {run_dir}"):
@@ -99,6 +103,8 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
     buffer = make_replay(config, env)
     rng = np.random.default_rng(config.seed)
     counters = restore_checkpoint(run_dir, agent, buffer, rng) if resume else Counters()
+    if config.init_from is not None and counters.env_steps == 0:  # not yet checkpointed: start warm
+        warm_start(run_dir, config, agent)
     write_config(run_dir, config)  # a resume's new epochs or machine, once its world and checkpoint are read
     extension = make_extension(config, env, agent, buffer, run_dir)
     episodes = Episodes(env, buffer, extension, rng)

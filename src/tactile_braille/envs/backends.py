@@ -36,9 +36,12 @@ class DatasetBackend:
 
     Args:
         task: the task played.
-        dataset: a loaded dataset, a path, or ``None`` for the default dataset
-            (``keys-train`` for discrete tasks, ``grid-<keys>`` for continuous
-            ones), generated into the cache on first use.
+        dataset: a loaded dataset, a path, the name of a default dataset
+            (:data:`~tactile_braille.datasets.cache.DEFAULT_DATASETS`, e.g.
+            ``grid-alphabet-6mm``; a file of that name takes precedence), or
+            ``None`` for the task's (``keys-train`` for discrete tasks,
+            ``grid-<keys>`` for continuous ones). Default datasets are
+            generated into the cache on first use.
         sensor: sensor preset of the default dataset.
         layout: the keyboard.
     """
@@ -54,11 +57,18 @@ class DatasetBackend:
     ) -> None:
         self.task = task
         self.layout = layout or KeyboardLayout()
-        if dataset is None:
-            from tactile_braille.datasets.cache import default_dataset
+        from tactile_braille.datasets.cache import DEFAULT_DATASETS, default_dataset
 
+        if dataset is None:
             name = f"grid-{task.keys}" if task.continuous else "keys-train"
             dataset = default_dataset(name, sensor=sensor, progress=False)
+        elif isinstance(dataset, str | Path) and not Path(dataset).exists():
+            if str(dataset) not in DEFAULT_DATASETS:
+                raise DatasetError(
+                    f"no dataset at {dataset}: give a dataset file or a default dataset's name "
+                    f"({', '.join(DEFAULT_DATASETS)})"
+                )
+            dataset = default_dataset(str(dataset), sensor=sensor, progress=False)
         elif not isinstance(dataset, TactileDataset):
             dataset = load_dataset(dataset)
         self.dataset = dataset

@@ -97,10 +97,23 @@ class RunRecord:
     the run predates ``world.json`` (a world before ``0.1.0+samples3``)."""
     transfer: dict | None = None
     """``transfer.json``: typing of the last checkpoint in other worlds (None if never, or stale)."""
+    grid: str | None = None
+    """The grid a continuous-task run learnt on where it is not its task's (``6 mm grid``), else None."""
+    init: dict | None = None
+    """``init.json``: what a warm-started run (``init_from``) took from its source run."""
 
     @property
     def variant(self) -> str:
         """The settings that set this run apart from others of its task and algorithm."""
+        if self.init is None:
+            return self.cold_variant
+        source = grid_label(self.init.get("world")) or "the default dataset"
+        warm = f"warm start: {self.init['epochs']} epochs on the {source}"
+        return f"{self.cold_variant}, {warm}" if self.cold_variant else warm
+
+    @property
+    def cold_variant(self) -> str:
+        """:attr:`variant` but for a warm start: that of the same run started from scratch."""
         if self.config is None:
             return ""
         from tactile_braille.agents.presets import PRESETS
@@ -112,6 +125,8 @@ class RunRecord:
             parts.append("no HER")
         if self.config.backend != "dataset":
             parts.append(f"{self.config.backend} backend")
+        if self.grid is not None:
+            parts.append(self.grid)
         if self.world != GENERATOR_VERSION:
             parts.append("earlier world" if self.world is None else f"world {self.world}")
         return ", ".join(parts + _departures(self.config))
@@ -128,6 +143,25 @@ class RunRecord:
     @property
     def reached_095(self) -> int | None:
         return convergence_epoch(list(self.returns), level=0.95)
+
+
+def grid_label(world: dict | None) -> str | None:
+    """``6 mm grid`` for a world whose dataset is a grid other than its task's default (the paper's
+    3 mm alphabet and 1 mm arrows grids), with its depth step where that differs too; else None."""
+    from tactile_braille.datasets.procedures import GridTaps
+
+    procedure = (world or {}).get("procedure") or {}
+    if procedure.get("procedure") != "grid":
+        return None
+    default = GridTaps(keys=procedure["keys"])
+    spacing, depth = procedure["spacing_mm"], procedure["depth_step_mm"]
+    if (spacing, depth) == (default.spacing_mm, default.depth_step_mm):
+        return None
+    return f"{spacing:g} mm grid" + (f" ({depth:g} mm depth steps)" if depth != default.depth_step_mm else "")
+
+
+def _read_json(path: Path) -> dict | None:
+    return json.loads(path.read_text()) if path.exists() else None
 
 
 def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
@@ -159,6 +193,7 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
             path=run_dir, task=task_name(config.task), algo=config.algo, seed=config.seed,
             returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
             seconds=float(np.nansum([row.get("time_s", np.nan) for row in rows])), transfer=transfer,
+            grid=grid_label(world), init=_read_json(run_dir / "init.json"),
             world=(GENERATOR_VERSION if task_of(config.task) is None else None)
             if world is None else world.get("generator_version", world.get("rig")),
         ))  # fmt: skip
@@ -203,6 +238,7 @@ def _stat(values, digits: int = 1) -> str:
 
 
 _RUN_SETTINGS = {"task", "algo", "preset", "seed", "epochs", "threads", "device", "dataset", "precision",
+                 "init_from",
                  "replay.her", "backend", "checkpoint_every", "evaluation.snapshots",
                  "evaluation.test_episodes"}  # fmt: skip
 """Settings that do not make a variant (or are named by it already)."""
@@ -264,11 +300,7 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
         )
         reset_accuracy = _stat([t["accuracy"] for t in reset], 3)
         convergence = _stat([r.convergence for r in records], 1)
-        reached = [r.reached_095 for r in records]
-        reached_text = _stat(reached, 1) if all(e is not None for e in reached) else (
-            f"{sum(e is not None for e in reached)}/{len(reached)} reached"
-            + (f"; {_stat(reached, 1)}" if any(e is not None for e in reached) else "")
-        )  # fmt: skip
+        reached_text = _reached_cell([r.reached_095 for r in records])
         paper = PAPER_TABLE.get(("sim", task, algo))
         paper_cells = [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
         lines.append(
@@ -278,6 +310,16 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
             f"| {reached_text} | " + " | ".join(paper_cells) + " |"
         )
     return "\n".join(lines)
+
+
+def _reached_cell(reached: list[int | None]) -> str:
+    """First epochs at 0.95 over seeds; how many reached it where some did not."""
+    if all(e is not None for e in reached):
+        return _stat(reached, 1)
+    some = any(e is not None for e in reached)
+    return f"{sum(e is not None for e in reached)}/{len(reached)} reached" + (
+        f"; {_stat(reached, 1)}" if some else ""
+    )
 
 
 def transfer_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
@@ -324,6 +366,99 @@ def _transfer_section(transfer_dirs) -> list[str]:
         "with the other TacTip (`sensor:tactip_127`); docs/evaluation.md says what this does and "
         "does not show.", "", transfer_table(moved), "", *listed, "",
     ]  # fmt: skip
+
+
+def warm_start_table(warm: dict, cold: dict) -> str:
+    """Warm-started groups (``init_from``) beside the same settings started from scratch (``cold``'s
+    group of their :attr:`RunRecord.cold_variant`): first epochs at 0.95, with the pretraining's."""
+    lines = [
+        "| task | algo | track | seeds | pretraining | its first epoch >= 0.95 | first epoch >= 0.95, warm "
+        "| from scratch (seeds): first epoch >= 0.95 | pretraining + warm epochs to 0.95 | accuracy, warm "
+        "| accuracy, from scratch |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]  # fmt: skip
+    for (task, algo, _), records in warm.items():
+        first = records[0]
+        scratch = cold.get((task, algo, first.cold_variant), [])
+        source = grid_label(first.init.get("world")) or "default dataset"
+        pretrained = [convergence_epoch(r.init["test_returns"], level=0.95) for r in records]
+        warm_reached = [r.reached_095 for r in records]
+        totals = [r.init["epochs"] + e for r, e in zip(records, warm_reached, strict=True) if e is not None]
+        cells = [
+            TASK_NAMES.get(task, task), _label(algo, first.cold_variant), first.track, str(len(records)),
+            f"{'/'.join(sorted({str(r.init['epochs']) for r in records}))} epochs, {source}",
+            _reached_cell(pretrained),
+            _reached_cell(warm_reached),
+            f"({len(scratch)}) {_reached_cell([r.reached_095 for r in scratch])}" if scratch else "-",
+            _stat(totals, 1) if len(totals) == len(records) else _reached_cell([None] * len(records)),
+            _accuracy_after(records), _accuracy_after(scratch),
+        ]  # fmt: skip
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _accuracy_after(records: list[RunRecord]) -> str:
+    """Typing accuracy over seeds, and after how many epochs."""
+    typed = [r for r in records if r.typing]
+    if not typed:
+        return "-"
+    epochs = "/".join(sorted({str(len(r.returns)) for r in typed}, key=int))
+    return f"{_stat([r.typing['accuracy'] for r in typed], 3)} after {epochs} epochs"
+
+
+def _warm_start_section(warm_dirs, cold: dict, figures: Path, link: str, written: set[str]) -> list[str]:
+    """The report's lines on warm-started runs (none without such runs); its figure joins ``written``."""
+    records = load_records(warm_dirs, evaluate_missing=False) if warm_dirs else []
+    warm = group([r for r in records if r.init is not None])
+    if not warm:
+        return []
+    figure = plot_warm_starts(warm, cold, figures / "warm_starts.png").name
+    written.add(figure)
+    listed = [
+        f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs"
+        + (f", from `{r.init['run']}` ({r.init['epochs']} epochs)" if r.init else "")
+        for r in records
+    ]
+    return [
+        "## Warm starts: learning on the paper's grid after a coarser one", "",
+        "The paper's Discussion: policies trained on a 6 mm grid sped up learning on the 3 mm grid. "
+        "Runs of their own (listed below), each started (`tactile-braille train ... --init-from RUN`) "
+        "from the last checkpoint of a run on a coarser grid (its networks, optimisers, temperature and "
+        "touch encoder; not its replay), beside the same settings started from scratch in Table III. "
+        "Epochs count from the warm start; the pretraining's are counted too, in their own columns.",
+        "", warm_start_table(warm, cold), "", f"![warm starts]({link}{figure})", "", *listed, "",
+    ]  # fmt: skip
+
+
+def plot_warm_starts(warm: dict, cold: dict, path: str | Path) -> Path:
+    """Test return per epoch of each warm-started group: the pretraining (negative epochs), the warm
+    start, and the same settings from scratch."""
+    from tactile_braille._figures import new_figure, save_figure
+
+    fig, axes = new_figure(1, len(warm), figsize=(6.2 * len(warm), 3.6))
+    for ax, ((task, algo, _), records) in zip(axes.ravel(), warm.items(), strict=False):
+        for index, record in enumerate(records):
+            pre = np.asarray(record.init["test_returns"])
+            label = {"label": "pretraining (coarser grid)"} if index == 0 else {}
+            ax.plot(np.arange(len(pre)) - len(pre) + 1, pre, color="grey", lw=0.8, alpha=0.6, **label)
+        scratch = cold.get((task, algo, records[0].cold_variant), [])
+        for members, colour, name in ((records, "C0", "warm start"), (scratch, "C1", "from scratch")):
+            if not members:
+                continue
+            length = min(len(r.returns) for r in members)
+            curves = np.stack([r.returns[:length] for r in members])
+            epochs = np.arange(1, length + 1)
+            ax.fill_between(epochs, curves.min(0), curves.max(0), color=colour, alpha=0.15)
+            ax.plot(epochs, curves.mean(0), color=colour, lw=2, label=f"{name}: mean of {len(members)} seeds")
+        ax.axvline(0.5, color="black", lw=0.6, ls=":")
+        ax.axhline(0.95, color="black", lw=0.6, ls="--")
+        ax.set_title(textwrap.fill(f"{task}, {_label(algo, records[0].variant)}", 70), fontsize=9)
+        ax.set_xlabel("epoch on the task's grid (250 steps; pretraining before 0)")
+        ax.set_ylabel("test return")
+        ax.set_ylim(-0.05, 1.05)
+        ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    return save_figure(fig, path)
 
 
 def _bound(record: RunRecord, protocol: str) -> float | None:
@@ -457,6 +592,7 @@ def write_report(
     notes: str | None = None,
     command: str | None = None,
     transfer_dirs=(),
+    warm_dirs=(),
 ) -> Path:
     """Evaluate the runs and write the report with its figures; returns its path.
 
@@ -471,6 +607,8 @@ def write_report(
         command: the command that made the report, quoted in it.
         transfer_dirs: runs whose typing in other worlds (``transfer.json``)
             is tabled in a section of its own; their other figures are not.
+        warm_dirs: warm-started runs (``init.json``) and their sources, tabled in a section of their
+            own beside ``run_dirs``' runs of the same settings from scratch.
     """
     from tactile_braille.evaluation.runs import save_typing_confusion
 
@@ -500,7 +638,7 @@ def write_report(
         "", results_table(groups), "", *([notes.strip(), ""] if notes else []),
         f"![training curves]({link}curves.png)", "",
     ]  # fmt: skip
-    lines += _transfer_section(transfer_dirs)
+    lines += _transfer_section(transfer_dirs) + _warm_start_section(warm_dirs, groups, figures, link, written)
     for (task, algo, variant), records in groups.items():
         name = f"{task.split('-')[0]}__{algo}" + (
             f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""
