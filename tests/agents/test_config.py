@@ -74,6 +74,9 @@ def test_train_config_rejects_bad_settings(kwargs, message):
         ({"update_every": 0}, "update_every"),
         ({"max_episode_steps": 0}, "max_episode_steps"),
         ({"start_steps": -1}, "start_steps"),
+        ({"frame_noise": (1.0, 2.0)}, "frame_noise randomises the live renderer's .* not 'dataset'"),
+        ({"frame_noise": (1.0,), "backend": "render"}, r"frame_noise is \(mm, degrees\), both >= 0"),
+        ({"frame_noise": (1.0, -2.0), "backend": "render"}, r"frame_noise is \(mm, degrees\)"),
     ],
 )
 def test_train_config_rejects(kwargs, message):
@@ -140,6 +143,7 @@ def test_train_config_json_round_trip(algo):
     for config in (
         preset_config("released", task, algo),
         preset_config("paper", task, algo, seed=3, precision="bf16", agent={"hidden": (64, 32)}),
+        preset_config("fast", task, algo, backend="render", frame_noise=(1.0, 2.0), init_from="runs/x"),
     ):
         again = TrainConfig.from_json(json.loads(json.dumps(config.to_json())))
         assert again == config

@@ -741,3 +741,31 @@ def test_the_vector_env_gives_the_proprio_observation_too(datasets):
     assert vector.single_observation_space["sensor_pose"].shape == (3,)
     with pytest.raises(TypeError, match="proprio must be True or False"):
         gym.make(env_id, dataset=datasets[env_id], proprio="yes")
+
+
+# ----------------------------------------------------------------------------- frame noise
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize(
+    "env_id", ["tactile_braille/ContinuousAlphabet-v0", "tactile_braille/DiscreteArrows-v0"]
+)
+def test_frame_noise_draws_a_calibration_error_per_episode_from_the_envs_seed(env_id):
+    env = gym.make(env_id, backend="render", frame_noise=(1.0, 2.0))
+    check_env(env.unwrapped)
+    rig = env.unwrapped._core.backend.rig
+
+    def error():
+        return (*rig.offset_mm, rig.rotation_deg)
+
+    env.reset(seed=5)
+    first = error()
+    assert first != (0.0, 0.0, 0.0) and max(map(abs, first[:2])) <= 1.0 and abs(first[2]) <= 2.0
+    env.step(env.action_space.sample())
+    env.reset(options={"keep_pose": True})  # the next key of a sentence: the same calibration
+    assert error() == first
+    env.reset()
+    assert error() != first  # a new episode: a new error
+    env.reset(seed=5)
+    assert error() == first  # the seed decides
+    assert env.unwrapped.world["work_frame_noise"]["max_rotation_deg"] == 2.0
+    with pytest.raises(ValueError, match="use backend='render', not 'dataset'"):
+        gym.make(env_id, frame_noise=(1.0, 2.0))

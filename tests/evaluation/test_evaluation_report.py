@@ -209,7 +209,9 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
     (runs[1] / "init.json").write_text(json.dumps(source))
     warm = write_report(runs[:1], tmp_path / "warm.md", warm_dirs=runs).read_text()
     row = warm.split("## Warm starts")[1].split("\n| disc arrow | ")[1].split("\n")[0]
-    assert row.startswith("DQN (custom, fp32, tactile track) | tactile | 1 | 4 epochs, default dataset | 3.0 ")
+    assert row.startswith(
+        "DQN (custom, fp32, tactile track) | tactile | 1 | 4 epochs, default dataset | 3.0 "
+    )
     assert "| (1) " in row and "](warm/warm_starts.png)" in warm
     assert (tmp_path / "warm" / "warm_starts.png").read_bytes()[:4] == b"\x89PNG"
     assert (

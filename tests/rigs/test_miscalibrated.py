@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tactile_braille.rigs.base import OutOfWorkspaceError, Pose, Workspace
-from tactile_braille.rigs.miscalibrated import MiscalibratedRig
+from tactile_braille.rigs.miscalibrated import MiscalibratedRig, RandomFrameRig, room_needed_mm, with_room
 from tactile_braille.rigs.virtual import VirtualRig
 
 
@@ -52,3 +52,45 @@ def test_commanded_poses_are_checked_against_the_calibrated_workspace():
     assert inner.pose == Pose(0.0, 0.0, 0.0, 0.0)  # nothing moved
     with pytest.raises(ValueError, match="finite"):
         MiscalibratedRig(inner, offset_mm=(np.nan, 0.0))
+
+
+def test_a_random_frame_draws_each_error_within_its_bounds_from_the_generator_it_is_given():
+    rig = RandomFrameRig(VirtualRig(seed=None), max_offset_mm=1.0, max_rotation_deg=2.0, pivot_mm=(5.0, 6.0))
+    assert rig.offset_mm == (0.0, 0.0) and rig.rotation_deg == 0.0  # no error before the first draw
+    draws = []
+    for _ in range(200):
+        rig.redraw(np.random.default_rng(len(draws)))
+        draws.append((*rig.offset_mm, rig.rotation_deg))
+    draws = np.array(draws)
+    assert np.abs(draws[:, :2]).max() <= 1.0 and np.abs(draws[:, 2]).max() <= 2.0
+    assert np.abs(draws[:, :2]).max() > 0.9 and np.abs(draws[:, 2]).max() > 1.8  # the whole range
+    rig.redraw(np.random.default_rng(0))
+    assert (*rig.offset_mm, rig.rotation_deg) == tuple(draws[0])  # the generator alone decides
+    assert rig.describe()["work_frame_noise"] == {
+        "max_offset_mm": 1.0, "max_rotation_deg": 2.0, "pivot_mm": [5.0, 6.0]
+    }  # fmt: skip
+    for bad in ((-1.0, 2.0), (1.0, np.inf)):
+        with pytest.raises(ValueError, match="finite and >= 0"):
+            RandomFrameRig(VirtualRig(seed=None), *bad)
+
+
+def test_the_room_left_past_the_edges_holds_every_landing_of_the_largest_errors():
+    box, pivot = Workspace(x_mm=(-40.0, 60.0), y_mm=(-250.0, 30.0)), (29.0, -90.0)
+    room = room_needed_mm(box, pivot, 1.0, 2.0)
+    widest = 0.0
+    for dx in (-1.0, 1.0):
+        for dy in (-1.0, 1.0):
+            for turn in (-2.0, 2.0):
+                rig = MiscalibratedRig(VirtualRig(seed=None), (dx, dy), turn, pivot)
+                for x in box.x_mm:
+                    for y in box.y_mm:
+                        landed = rig.landing(Pose(x, y, 0.0, 0.0))
+                        past = max(box.x_mm[0] - landed.x_mm, landed.x_mm - box.x_mm[1],
+                                   box.y_mm[0] - landed.y_mm, landed.y_mm - box.y_mm[1])  # fmt: skip
+                        widest = max(widest, past)
+    assert widest <= room <= widest + 2.5  # room enough, and not much more
+    inner, calibrated = with_room(VirtualRig(seed=None), room)
+    assert (
+        inner.workspace.x_mm[0] == calibrated.x_mm[0] - room
+        and inner.workspace.depth_mm == calibrated.depth_mm
+    )

@@ -364,6 +364,9 @@ class TrainConfig:
             (``update_every * updates_per_step`` at a time; the released TD3 used 100).
         max_episode_steps: episode cut (None: the registry's 25).
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
+        frame_noise: ``(mm, degrees)``: the render backend's work frame off by an error drawn anew each
+            episode, offsets within +-mm along x and y, a turn within +-degrees (domain randomisation
+            against calibration errors; None: none).
         dataset: dataset for the dataset backend: a path, or a default dataset's name
             (``grid-alphabet-6mm``...; default: the task's, cached).
         device: torch device (``cpu``, ``cuda``, ``cuda:1``...).
@@ -394,6 +397,7 @@ class TrainConfig:
     update_every: int = 1
     max_episode_steps: int | None = None
     backend: Backend = "dataset"
+    frame_noise: tuple[float, ...] | None = None
     dataset: str | None = None
     device: str = "cpu"
     precision: Precision = "fp32"
@@ -420,7 +424,10 @@ class TrainConfig:
             raise ValueError(f"{self.algo} takes a {agent_config.__name__}, got {type(self.agent).__name__}")
         if self.updates_per_step is None:
             object.__setattr__(self, "updates_per_step", 1 if self.algo == "td3" else 2)
+        if isinstance(self.frame_noise, list):  # as config.json stores it
+            object.__setattr__(self, "frame_noise", tuple(self.frame_noise))
         check_types(self)
+        self._check_frame_noise()
         _at_least(self, 1, "epochs", "steps_per_epoch", "update_every", "checkpoint_every", "threads",
                   "max_episode_steps")  # fmt: skip
         _at_least(self, 0, "seed", "start_steps", "updates_per_step")
@@ -437,6 +444,16 @@ class TrainConfig:
                 f"the tactile track allows only the observation dictionary and the reward, but {uses}: "
                 "set track='proprio' (--track proprio) or turn them off"
             )
+
+    def _check_frame_noise(self) -> None:
+        noise = self.frame_noise
+        if noise is None:
+            return
+        if len(noise) != 2 or min(noise) < 0:
+            raise ValueError(f"frame_noise is (mm, degrees), both >= 0, got {noise}")
+        if self.backend != "render":
+            raise ValueError(f"frame_noise randomises the live renderer's work frame: set backend='render' "
+                             f"(--backend render), not {self.backend!r}")  # fmt: skip
 
     def _check_task(self) -> None:
         from tactile_braille.envs.registry import task_of  # the environments' registry, not torch

@@ -220,6 +220,8 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
     config.check_rig(rig)
     if task_of(config.task) is not None:
         kwargs["backend"] = config.backend
+        if config.frame_noise is not None:
+            kwargs["frame_noise"] = config.frame_noise
         if config.dataset is not None:
             kwargs["dataset"] = config.dataset
         if rig is not None:

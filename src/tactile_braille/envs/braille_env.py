@@ -26,19 +26,39 @@ def make_backend(
     dataset: TactileDataset | str | Path | None,
     rig: Rig | None,
     sensor: str,
+    frame_noise: tuple[float, float] | None = None,
 ):
-    """Build the backend called ``backend`` for ``task``."""
+    """Build the backend called ``backend`` for ``task`` (``frame_noise``: see :class:`BrailleEnv`)."""
+    if frame_noise is not None and backend != "render":
+        raise ValueError(f"frame_noise randomises the live renderer's work frame: use backend='render', "
+                         f"not {backend!r}")  # fmt: skip
     if backend == "dataset":
         return DatasetBackend(task, dataset, sensor=sensor)
     if backend == "render":
         from tactile_braille.rigs.virtual import VirtualRig
 
-        return RigBackend(VirtualRig(sensor=sensor))
+        if frame_noise is None:
+            return RigBackend(VirtualRig(sensor=sensor))
+        return RigBackend(_random_frame_rig(task, sensor, frame_noise))
     if backend == "rig":
         if rig is None:
             raise ValueError("backend='rig' needs a rig (rig=...)")
         return RigBackend(rig)
     raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
+
+
+def _random_frame_rig(task: Task, sensor: str, frame_noise: tuple[float, float]):
+    """A virtual rig behind a work-frame error redrawn every episode, with room for its taps to land."""
+    from tactile_braille.rigs.miscalibrated import RandomFrameRig, room_needed_mm, with_room
+    from tactile_braille.rigs.virtual import VirtualRig
+
+    if len(frame_noise) != 2:
+        raise ValueError(f"frame_noise is (max offset in mm, max rotation in degrees), got {frame_noise!r}")
+    offset, rotation = frame_noise
+    inner = VirtualRig(sensor=sensor)
+    room = room_needed_mm(inner.workspace, task.frame_origin_mm, offset, rotation)
+    inner, calibrated = with_room(inner, room)
+    return RandomFrameRig(inner, offset, rotation, task.frame_origin_mm, workspace=calibrated)
 
 
 class BrailleEnv(gym.Env):
@@ -56,6 +76,7 @@ class BrailleEnv(gym.Env):
         sensor: str = "braille_331",
         render_mode: str | None = None,
         proprio: bool = False,
+        frame_noise: tuple[float, float] | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -64,7 +85,7 @@ class BrailleEnv(gym.Env):
         self.task = Task(keys=keys, continuous=self.continuous)
         self._dome_radius_mm = sensor_preset(sensor).dome_diameter_mm / 2
         self._core = BatchedBraille(
-            self.task, make_backend(self.task, backend, dataset, rig, sensor), 1, proprio=proprio
+            self.task, make_backend(self.task, backend, dataset, rig, sensor, frame_noise), 1, proprio=proprio
         )
         self.observation_space = self._core.observation_space()
         self.action_space = self._core.action_space()
@@ -109,6 +130,9 @@ class BrailleEnv(gym.Env):
         if keep_pose and not self._path_mm:
             raise ValueError("keep_pose needs an earlier reset: there is no pose to keep")
         super().reset(seed=seed)
+        redraw = getattr(getattr(self._core.backend, "rig", None), "redraw", None)
+        if redraw is not None and not keep_pose:  # frame_noise: a new calibration error (not mid-sentence)
+            redraw(self.np_random)
         self._core.reset(self._all, self.np_random, keep_pose=keep_pose)
         if goal is not None:
             self._core.goal[0] = self.goal_keys.index(goal)

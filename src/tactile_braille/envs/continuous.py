@@ -56,6 +56,12 @@ class ContinuousBrailleEnv(BrailleEnv):
     * ``proprio``: the observation also holds ``sensor_pose`` (float32 keyboard-frame
       x, y and tap depth in mm, what the arm reports): the ``proprio`` track's
       observation (docs/benchmark.md). Default False: the paper's.
+    * ``frame_noise``: ``(mm, degrees)``, ``backend="render"`` only: the work
+      frame is off by an error drawn anew at each reset (not with
+      ``keep_pose``), offsets uniform within +-mm along x and y and a turn
+      within +-degrees about the task's origin; observations report the
+      commanded pose. Domain randomisation against calibration errors
+      (docs/evaluation.md). Default None: no error.
 
     ``info`` holds ``is_success``, ``pressed_key``, ``sensor_pose_mm`` and ``goal_key``.
 

@@ -19,7 +19,7 @@ how the real sensor's images differ from rendered ones.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import gymnasium as gym
 
@@ -62,17 +62,10 @@ class World:
         sensor = self.sensor or sensor
         if self.offset_mm == (0.0, 0.0) and self.rotation_deg == 0.0:
             return gym.make(task_id, backend="render", sensor=sensor, **options)
-        from tactile_braille.rigs.miscalibrated import MiscalibratedRig
+        from tactile_braille.rigs.miscalibrated import MiscalibratedRig, with_room
         from tactile_braille.rigs.virtual import VirtualRig
 
-        inner = VirtualRig(sensor=sensor)
-        calibrated, room = inner.workspace, EDGE_ROOM_MM
-        # Commands are checked against the calibrated box; where they land may pass its edges a little.
-        inner.workspace = replace(
-            calibrated,
-            x_mm=(calibrated.x_mm[0] - room, calibrated.x_mm[1] + room),
-            y_mm=(calibrated.y_mm[0] - room, calibrated.y_mm[1] + room),
-        )
+        inner, calibrated = with_room(VirtualRig(sensor=sensor), EDGE_ROOM_MM)
         pivot = task_of(task_id).frame_origin_mm
         rig = MiscalibratedRig(inner, self.offset_mm, self.rotation_deg, pivot, workspace=calibrated)
         return gym.make(task_id, backend="rig", rig=rig, **options)

@@ -4,11 +4,15 @@ A policy commands taps in the calibrated keyboard frame. If the calibration is
 off by a small rigid motion, every tap lands displaced and turned:
 :class:`MiscalibratedRig` wraps any rig and applies that motion to each
 commanded pose, so the same code path types under a known calibration error.
+:class:`RandomFrameRig` draws a new error for every episode (domain
+randomisation: training that expects its calibration to be off).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -106,3 +110,58 @@ class MiscalibratedRig:
 
     def __exit__(self, *exc_info) -> None:
         self.close()
+
+
+class RandomFrameRig(MiscalibratedRig):
+    """A :class:`MiscalibratedRig` whose error :meth:`redraw` draws anew: offsets uniform in
+    ``[-max_offset_mm, max_offset_mm]`` along x and y, a rotation uniform in ``[-max_rotation_deg,
+    max_rotation_deg]`` (no error until the first draw). The environments redraw it at each reset.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        max_offset_mm: float,
+        max_rotation_deg: float,
+        pivot_mm: tuple[float, float] = (0.0, 0.0),
+        workspace: Workspace | None = None,
+    ) -> None:
+        bounds = (max_offset_mm, max_rotation_deg)
+        if not all(isinstance(b, int | float) and math.isfinite(b) and b >= 0 for b in bounds):
+            raise ValueError(f"max_offset_mm and max_rotation_deg must be finite and >= 0, got {bounds}")
+        super().__init__(rig, (0.0, 0.0), 0.0, pivot_mm, workspace)
+        self.max_offset_mm, self.max_rotation_deg = float(max_offset_mm), float(max_rotation_deg)
+
+    def redraw(self, rng: np.random.Generator) -> None:
+        """A new calibration error, drawn from ``rng``."""
+        dx, dy = rng.uniform(-self.max_offset_mm, self.max_offset_mm, 2)
+        self.offset_mm = (float(dx), float(dy))
+        self.rotation_deg = float(rng.uniform(-self.max_rotation_deg, self.max_rotation_deg))
+
+    def describe(self) -> dict:
+        """The wrapped rig's description, with the bounds of the errors drawn (not the present draw)."""
+        noise = {"max_offset_mm": self.max_offset_mm, "max_rotation_deg": self.max_rotation_deg,
+                 "pivot_mm": list(self.pivot_mm)}  # fmt: skip
+        return {**self.rig.describe(), "work_frame_noise": noise}
+
+
+def with_room(rig, room_mm: float):
+    """``rig`` with its workspace widened by ``room_mm`` in x and y (depth and yaw kept), and its
+    former workspace: commands are checked against the calibrated box, where they land may pass its
+    edges a little."""
+    calibrated = rig.workspace
+    rig.workspace = replace(
+        calibrated,
+        x_mm=(calibrated.x_mm[0] - room_mm, calibrated.x_mm[1] + room_mm),
+        y_mm=(calibrated.y_mm[0] - room_mm, calibrated.y_mm[1] + room_mm),
+    )
+    return rig, calibrated
+
+
+def room_needed_mm(
+    workspace: Workspace, pivot_mm: tuple[float, float], offset_mm: float, rotation_deg: float
+):
+    """How far past ``workspace`` a tap may land under an error of up to ``offset_mm`` along each axis
+    and ``rotation_deg`` about ``pivot_mm`` (the farthest corner's displacement), plus 1 mm."""
+    reach = max(math.hypot(x - pivot_mm[0], y - pivot_mm[1]) for x in workspace.x_mm for y in workspace.y_mm)
+    return offset_mm * math.sqrt(2) + 2 * reach * math.sin(math.radians(rotation_deg) / 2) + 1.0
