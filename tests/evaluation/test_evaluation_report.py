@@ -261,3 +261,10 @@ def test_a_warm_start_is_tabled_beside_the_same_settings_from_scratch():
     assert row[8].startswith("16.5 [16.0, 17.0]")  # 15 pretraining epochs each
     assert row[9].startswith("0.980") and row[9].endswith("after 2 epochs")
     assert row[10].startswith("0.850") and row[10].endswith("after 4 epochs |")
+
+
+def test_a_run_with_frame_noise_names_it_in_its_variant():
+    task = "ContinuousAlphabet-v0"
+    config = preset_config("fast", f"tactile_braille/{task}", "sac", backend="render", frame_noise=(1.0, 2.0))
+    run = RunRecord(path="runs/0", task=task, algo="sac", seed=0, returns=np.zeros(2), config=config)
+    assert run.variant == "fast, fp32, render backend, frame noise 1 mm, 2 deg"

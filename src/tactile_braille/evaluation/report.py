@@ -125,6 +125,8 @@ class RunRecord:
             parts.append("no HER")
         if self.config.backend != "dataset":
             parts.append(f"{self.config.backend} backend")
+        if self.config.frame_noise is not None:
+            parts.append("frame noise {:g} mm, {:g} deg".format(*self.config.frame_noise))
         if self.grid is not None:
             parts.append(self.grid)
         if self.world != GENERATOR_VERSION:
@@ -238,7 +240,7 @@ def _stat(values, digits: int = 1) -> str:
 
 
 _RUN_SETTINGS = {"task", "algo", "preset", "seed", "epochs", "threads", "device", "dataset", "precision",
-                 "init_from",
+                 "init_from", "frame_noise",
                  "replay.her", "backend", "checkpoint_every", "evaluation.snapshots",
                  "evaluation.test_episodes"}  # fmt: skip
 """Settings that do not make a variant (or are named by it already)."""
