@@ -63,6 +63,10 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = 30, ["30"]
         if name == "touch.labels":  # pose inputs need the robot's labels (refused otherwise, test_tracks)
             value, words = "robot", ["robot"]
+        if name == "backend":  # frame noise needs the live renderer (refused otherwise, test_config)
+            value, words = "render", ["render"]
+        if name == "frame_noise":
+            value, words = (1.0, 2.0), ["1.0", "2.0"]
         flag = "--" + name.replace("_", "-")
         argv += [flag, *words] if words is not None else [flag if value else "--no-" + flag[2:]]
         wanted[name] = list(value) if isinstance(value, tuple) else value

@@ -418,7 +418,7 @@ def _warm_start_section(warm_dirs, cold: dict, figures: Path, link: str, written
     written.add(figure)
     listed = [
         f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs"
-        + (f", from `{r.init['run']}` ({r.init['epochs']} epochs)" if r.init else "")
+        + (f", warm start from `{Path(r.init['run']).name}` ({r.init['epochs']} epochs)" if r.init else "")
         for r in records
     ]
     return [
