@@ -454,6 +454,8 @@ def plot_warm_starts(warm: dict, cold: dict, path: str | Path) -> Path:
             ax.plot(epochs, curves.mean(0), color=colour, lw=2, label=f"{name}: mean of {len(members)} seeds")
         ax.axvline(0.5, color="black", lw=0.6, ls=":")
         ax.axhline(0.95, color="black", lw=0.6, ls="--")
+        pretraining = max(len(r.init["test_returns"]) for r in records)
+        ax.set_xlim(-pretraining, 1.5 * max(len(r.returns) for r in records))  # the scratch runs may go on
         ax.set_title(textwrap.fill(f"{task}, {_label(algo, records[0].variant)}", 70), fontsize=9)
         ax.set_xlabel("epoch on the task's grid (250 steps; pretraining before 0)")
         ax.set_ylabel("test return")
