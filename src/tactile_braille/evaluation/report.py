@@ -362,7 +362,8 @@ def _transfer_section(transfer_dirs) -> list[str]:
     return [
         "## Transfer: typing in worlds the policies did not learn in", "",
         "Runs of their own (listed below the table), trained on the dataset backend (or, where the row "
-        "says so, the render backend) and typed "
+        "says so, the render backend, and there with the work frame off by a random error each episode: "
+        "'frame noise') and typed "
         "(`tactile-braille evaluate RUN --world transfer`, the paper's protocol) in the live renderer "
         "(`render`), in it with the work frame off by 1 mm and 2 degrees (`frame:DX,DY,DEG`), and "
         "with the other TacTip (`sensor:tactip_127`); docs/evaluation.md says what this does and "
