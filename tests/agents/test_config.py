@@ -77,6 +77,7 @@ def test_train_config_rejects_bad_settings(kwargs, message):
         ({"frame_noise": (1.0, 2.0)}, "frame_noise randomises the live renderer's .* not 'dataset'"),
         ({"frame_noise": (1.0,), "backend": "render"}, r"frame_noise is \(mm, degrees\), both >= 0"),
         ({"frame_noise": (1.0, -2.0), "backend": "render"}, r"frame_noise is \(mm, degrees\)"),
+        ({"frame_noise": (1.0, 40.0), "backend": "render"}, "degrees at most 30"),
     ],
 )
 def test_train_config_rejects(kwargs, message):

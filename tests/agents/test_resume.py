@@ -166,3 +166,10 @@ def test_a_resume_cleans_a_killed_writers_temporary_files_and_logs_each_step_onc
     events.Reload()
     steps = [event.step for event in events.Scalars("charts/test/episodic_return")]
     assert steps == sorted(set(steps)) == [30, 60, 90]
+
+
+def test_a_dataset_that_is_neither_a_file_nor_a_default_name_is_refused_before_the_folder(tmp_path, capsys):
+    run = tmp_path / "run"
+    command = ["train", "ContinuousAlphabet-v0", "sac", "--dataset", "grid-alphabet-6mn", "--quiet"]
+    assert main([*command, "--run-dir", str(run)]) != 0
+    assert "nor a default dataset's name (" in one_line_error(capsys) and not run.exists()

@@ -119,16 +119,21 @@ def test_the_command_line_refuses_a_bad_warm_start_in_one_line(tmp_path, capsys)
     assert error.count("\n") == 1 and "no training run there" in error and not run.exists()
 
 
-def test_a_warm_start_without_a_source_checkpoint_or_from_itself_is_refused(source, env_datasets, tmp_path):
-    bare = tmp_path / "bare"
-    bare.mkdir()
-    (bare / "config.json").write_text((source / "config.json").read_text())
+def test_a_warm_start_without_a_readable_source_or_from_itself_is_refused(source, env_datasets, tmp_path):
+    bare, damaged = tmp_path / "bare", tmp_path / "damaged"
+    for folder in (bare, damaged):
+        folder.mkdir()
+        (folder / "config.json").write_text((source / "config.json").read_text())
+    (damaged / CHECKPOINT_FILE).write_bytes((source / CHECKPOINT_FILE).read_bytes()[:1000])  # truncated
+    before = {path.name: path.read_bytes() for path in source.iterdir() if path.is_file()}
     for origin, message in [
         (tmp_path / "nowhere", "no training run there"),
         (bare, "has no checkpoint.pt"),
+        (damaged, "checkpoint.pt is unreadable"),
         (source, "this run's own folder"),
     ]:
         run = source if origin == source else tmp_path / "warm"
         with pytest.raises(ValueError, match=message):
             train(touch_config(env_datasets, "sac", init_from=str(origin)), run_dir=run, progress=False)
         assert not (tmp_path / "warm").exists()
+    assert {path.name: path.read_bytes() for path in source.iterdir() if path.is_file()} == before

@@ -439,3 +439,11 @@ def test_vector_env_pickles_and_continues_identically(env_id, make_vec):
     clone = pickle.loads(pickle.dumps(vec))
     for action in actions[5:]:
         assert_same(vec.step(action), clone.step(action))
+
+
+def test_frame_noise_is_refused_by_the_vector_env_with_what_to_use_instead():
+    with pytest.raises(
+        ValueError, match=r"frame_noise is not supported by the vectorised .* vectorization_mode='sync'\)"
+    ):
+        gym.make_vec("tactile_braille/ContinuousArrows-v0", num_envs=2, backend="render",
+                     vectorization_mode="vector_entry_point", frame_noise=(1.0, 2.0))  # fmt: skip

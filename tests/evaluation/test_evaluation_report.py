@@ -20,6 +20,7 @@ from tactile_braille.evaluation.report import (
     load_records,
     original_curves,
     results_table,
+    source_world,
     transfer_table,
     warm_start_table,
     write_report,
@@ -231,6 +232,8 @@ def test_grid_label_names_only_a_grid_other_than_the_tasks():
     paper = {"procedure": {**GRID_6MM["procedure"], "spacing_mm": 3.0}}
     assert grid_label(paper) is None and grid_label(None) is None
     assert grid_label({"procedure": {"procedure": "perturbed", "keys": "all"}}) is None
+    assert source_world(GRID_6MM) == "6 mm grid" and source_world({"backend": "render"}) == "render backend"
+    assert source_world(None) == "default dataset"
 
 
 def test_a_warm_start_is_tabled_beside_the_same_settings_from_scratch():

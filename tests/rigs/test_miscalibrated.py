@@ -72,6 +72,8 @@ def test_a_random_frame_draws_each_error_within_its_bounds_from_the_generator_it
     for bad in ((-1.0, 2.0), (1.0, np.inf)):
         with pytest.raises(ValueError, match="finite and >= 0"):
             RandomFrameRig(VirtualRig(seed=None), *bad)
+    with pytest.raises(ValueError, match="at most 30"):
+        RandomFrameRig(VirtualRig(seed=None), 1.0, 31.0)
 
 
 def test_the_room_left_past_the_edges_holds_every_landing_of_the_largest_errors():

@@ -449,8 +449,8 @@ class TrainConfig:
         noise = self.frame_noise
         if noise is None:
             return
-        if len(noise) != 2 or min(noise) < 0:
-            raise ValueError(f"frame_noise is (mm, degrees), both >= 0, got {noise}")
+        if len(noise) != 2 or min(noise) < 0 or noise[1] > 30:
+            raise ValueError(f"frame_noise is (mm, degrees), both >= 0, degrees at most 30, got {noise}")
         if self.backend != "render":
             raise ValueError(f"frame_noise randomises the live renderer's work frame: set backend='render' "
                              f"(--backend render), not {self.backend!r}")  # fmt: skip

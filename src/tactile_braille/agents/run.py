@@ -283,24 +283,34 @@ def check_init_from(config: TrainConfig, run_dir: Path) -> None:
             f"init_from {source} learnt with other settings ({'; '.join(other)}); a warm start may change "
             f"only where and how long it learns ({', '.join(INIT_FREE)})"
         )
+    _source_checkpoint(source, "cpu")
+    if not (source / PROGRESS_FILE).exists():
+        raise ValueError(f"init_from {source}: the run has no {PROGRESS_FILE}")
+
+
+def _source_checkpoint(source: Path, device) -> dict:
+    """A warm start's source checkpoint, or a ValueError naming it where it is unreadable."""
+    path = source / CHECKPOINT_FILE
+    try:
+        state = torch.load(path, weights_only=False, map_location=device)
+        return {"agent": state["agent"], "epoch": int(state["epoch"]), "env_steps": int(state["env_steps"]),
+                "updates": int(state["updates"])}  # fmt: skip
+    except Exception as error:  # torch raises many kinds on a truncated or foreign file
+        raise ValueError(
+            f"init_from {path} is unreadable ({type(error).__name__}: {str(error)[:120]})"
+        ) from None
 
 
 def warm_start(run_dir: Path, config: TrainConfig, agent) -> None:
     """Load the source run's last checkpointed agent (:func:`check_init_from` has passed) and record
     in ``init.json`` what was taken: its epochs, steps, test returns and world."""
     source = Path(config.init_from)
-    path = source / CHECKPOINT_FILE
-    try:
-        state = torch.load(path, weights_only=False, map_location=agent.device)
-        agent.load_state_dict(state["agent"])
-    except Exception as error:  # torch raises many kinds on a truncated or foreign file
-        raise ValueError(
-            f"init_from {path} is unreadable ({type(error).__name__}: {str(error)[:120]})"
-        ) from None
-    epochs = int(state["epoch"]) + 1
+    state = _source_checkpoint(source, agent.device)
+    agent.load_state_dict(state["agent"])
+    epochs = state["epoch"] + 1
     record = {
         "run": str(source), "seed": read_config(source).seed, "epochs": epochs,
-        "env_steps": int(state["env_steps"]), "updates": int(state["updates"]),
+        "env_steps": state["env_steps"], "updates": state["updates"],
         "test_returns": [row["test/episodic_return"] for row in read_progress(source)[:epochs]],
         "world": run_world(source),
     }  # fmt: skip

@@ -87,6 +87,7 @@ def train(
         check_init_from(config or TrainConfig(), run_dir)
     if config is not None:
         check_device(config.device)
+        check_dataset(config)
     with exclusive_lock(run_dir / LOCK_FILE, f"the run {run_dir}"):
         config = open_run(config, run_dir, resume, rig)
         check_device(config.device)  # a resume's stored device
@@ -156,6 +157,23 @@ def check_device(device: str) -> None:
         raise ValueError(f"device {device!r}: this machine has {torch.cuda.device_count()} CUDA devices")
     if device == "mps" and not torch.backends.mps.is_available():
         raise ValueError("device 'mps': Apple's Metal backend is not available here; use cpu")
+
+
+def check_dataset(config: TrainConfig) -> None:
+    """Refuse a dataset that is neither a file nor a default dataset's name, before anything is written."""
+    from tactile_braille.datasets.cache import DEFAULT_DATASETS
+
+    dataset = config.dataset
+    if (
+        dataset is None
+        or config.backend != "dataset"
+        or Path(dataset).exists()
+        or dataset in DEFAULT_DATASETS
+    ):
+        return
+    raise ValueError(
+        f"dataset {dataset!r}: no such file, nor a default dataset's name ({', '.join(DEFAULT_DATASETS)})"
+    )
 
 
 def updates_due(config: TrainConfig, env_steps: int, buffer: EpisodeReplayBuffer) -> bool:

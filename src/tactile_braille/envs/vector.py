@@ -65,7 +65,14 @@ class VectorBrailleEnv(VectorEnv):
         backend: str = "dataset",
         proprio: bool = False,
         render_device: str | None = "auto",
+        frame_noise: tuple[float, float] | None = None,
     ) -> None:
+        if frame_noise is not None:
+            raise ValueError(
+                "frame_noise is not supported by the vectorised environment (one calibration error per "
+                "episode of each sub-environment is not built): use gym.make, or "
+                "gym.make_vec(..., vectorization_mode='sync')"
+            )
         if backend not in VECTOR_BACKENDS:
             choices = " or ".join(VECTOR_BACKENDS)
             raise ValueError(f"the vectorised environment runs on the {choices} backend, not {backend!r}")

@@ -107,8 +107,7 @@ class RunRecord:
         """The settings that set this run apart from others of its task and algorithm."""
         if self.init is None:
             return self.cold_variant
-        source = grid_label(self.init.get("world")) or "the default dataset"
-        warm = f"warm start: {self.init['epochs']} epochs on the {source}"
+        warm = f"warm start: {self.init['epochs']} epochs on the {source_world(self.init.get('world'))}"
         return f"{self.cold_variant}, {warm}" if self.cold_variant else warm
 
     @property
@@ -160,6 +159,14 @@ def grid_label(world: dict | None) -> str | None:
     if (spacing, depth) == (default.spacing_mm, default.depth_step_mm):
         return None
     return f"{spacing:g} mm grid" + (f" ({depth:g} mm depth steps)" if depth != default.depth_step_mm else "")
+
+
+def source_world(world: dict | None) -> str:
+    """Where a warm start's source learnt, in a few words: ``6 mm grid``, ``render backend``..."""
+    world = world or {}
+    if world.get("backend", "dataset") != "dataset":
+        return f"{world['backend']} backend"
+    return grid_label(world) or "default dataset"
 
 
 def _read_json(path: Path) -> dict | None:
@@ -383,7 +390,7 @@ def warm_start_table(warm: dict, cold: dict) -> str:
     for (task, algo, _), records in warm.items():
         first = records[0]
         scratch = cold.get((task, algo, first.cold_variant), [])
-        source = grid_label(first.init.get("world")) or "default dataset"
+        source = source_world(first.init.get("world"))
         pretrained = [convergence_epoch(r.init["test_returns"], level=0.95) for r in records]
         warm_reached = [r.reached_095 for r in records]
         totals = [r.init["epochs"] + e for r, e in zip(records, warm_reached, strict=True) if e is not None]

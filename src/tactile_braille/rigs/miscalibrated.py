@@ -112,6 +112,11 @@ class MiscalibratedRig:
         self.close()
 
 
+MAX_FRAME_ROTATION_DEG = 30.0
+"""The largest turn :class:`RandomFrameRig` draws: the rigs' yaw limit (45 degrees) less the yaw a
+discrete task's tap may command (10 degrees), with room to spare."""
+
+
 class RandomFrameRig(MiscalibratedRig):
     """A :class:`MiscalibratedRig` whose error :meth:`redraw` draws anew: offsets uniform in
     ``[-max_offset_mm, max_offset_mm]`` along x and y, a rotation uniform in ``[-max_rotation_deg,
@@ -129,6 +134,11 @@ class RandomFrameRig(MiscalibratedRig):
         bounds = (max_offset_mm, max_rotation_deg)
         if not all(isinstance(b, int | float) and math.isfinite(b) and b >= 0 for b in bounds):
             raise ValueError(f"max_offset_mm and max_rotation_deg must be finite and >= 0, got {bounds}")
+        if max_rotation_deg > MAX_FRAME_ROTATION_DEG:
+            raise ValueError(
+                f"max_rotation_deg must be at most {MAX_FRAME_ROTATION_DEG:g} (the rig's yaw limit), "
+                f"got {max_rotation_deg}"
+            )
         super().__init__(rig, (0.0, 0.0), 0.0, pivot_mm, workspace)
         self.max_offset_mm, self.max_rotation_deg = float(max_offset_mm), float(max_rotation_deg)
 
