@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -10,6 +11,8 @@ import pytest
 import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
+from tactile_braille.agents.config import TrainConfig
+from tactile_braille.agents.presets import preset_config
 from tactile_braille.cli import main
 from tactile_braille.envs.oracle import oracle_action
 from tactile_braille.envs.tasks import DISCRETE_ACTIONS
@@ -17,10 +20,12 @@ from tactile_braille.evaluation import PolicyError, TypingReport, evaluate_polic
 from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
 from tactile_braille.evaluation.protocol import paper_sequences
 from tactile_braille.evaluation.results import make_result, read_result, write_result
+from tactile_braille.evaluation.runs import run_method
 
 ARROWS = "tactile_braille/DiscreteArrows-v0"
 CONTINUOUS = "tactile_braille/ContinuousArrows-v0"
 PRESS = DISCRETE_ACTIONS.index("PRESS")
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture
@@ -264,3 +269,23 @@ def test_cli_leaderboard_refuses_what_is_not_a_result(tmp_path, capsys):
     assert main(["leaderboard", str(tmp_path)]) == 2
     assert "is a folder but not a run or a record" in capsys.readouterr().err
     assert load_results([]) == []
+
+
+def test_a_runs_method_names_each_setting_it_changed_in_its_preset():
+    alphabet = "tactile_braille/DiscreteAlphabet-v0"
+    assert run_method(preset_config("paper", alphabet, "dqn")) == "tactile_braille DQN + HER (`paper`)"
+    # Epochs, seeds and machine settings make no other method; a changed learning setting does.
+    assert run_method(preset_config("paper", alphabet, "dqn", epochs=40, seed=3, precision="bf16")) == (
+        "tactile_braille DQN + HER (`paper`)"
+    )
+    changed = preset_config("paper", alphabet, "dqn", replay={"relabel": "all"}, agent={"gamma": 0.9})
+    assert run_method(changed) == "tactile_braille DQN + HER (`paper`, agent.gamma=0.9, replay.relabel=all)"
+
+
+def test_every_committed_results_file_names_the_method_its_settings_ran():
+    files = sorted(ROOT.glob("results/**/result.json"))
+    recorded = [file for file in files if (file.parent / "config.json").exists()]
+    assert recorded, "the repository commits run records with results files"
+    for file in recorded:
+        config = TrainConfig.from_json(json.loads((file.parent / "config.json").read_text()))
+        assert read_result(file)["method"] == run_method(config), file

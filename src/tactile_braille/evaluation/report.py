@@ -130,7 +130,7 @@ class RunRecord:
             parts.append(self.grid)
         if self.world != GENERATOR_VERSION:
             parts.append("earlier world" if self.world is None else f"world {self.world}")
-        return ", ".join(parts + _departures(self.config))
+        return ", ".join(parts + departures(self.config))
 
     @property
     def track(self) -> str:
@@ -253,7 +253,7 @@ _RUN_SETTINGS = {"task", "algo", "preset", "seed", "epochs", "threads", "device"
 """Settings that do not make a variant (or are named by it already)."""
 
 
-def _departures(config: TrainConfig) -> list[str]:
+def departures(config: TrainConfig) -> list[str]:
     """``name=value`` for each setting in which a run departs from its preset (an ablation)."""
     from tactile_braille.agents.presets import PRESETS, preset_config
 
