@@ -107,7 +107,7 @@ def test_cli_train_argument_errors(argv, message, tmp_path, monkeypatch, capsys)
     assert not (tmp_path / "runs").exists()
 
 
-def test_benchmark_runs_each_preset_in_its_own_folders_and_refuses_unknown_tasks(
+def test_benchmark_runs_each_preset_in_its_own_folders_and_refuses_unknown_rows(
     tmp_path, monkeypatch, capsys
 ):
     calls = []
@@ -129,3 +129,13 @@ def test_benchmark_runs_each_preset_in_its_own_folders_and_refuses_unknown_tasks
     assert [t.preset for t in calls[1][2]] == ["released"] * 4
     assert main(["benchmark", "--paper", "--tasks", "DiscreteArrow-v0"]) == 2
     assert "no Table III rows for ['DiscreteArrow-v0']" in capsys.readouterr().err
+    calls.clear()
+    assert main([*argv, "--algos", "dqn"]) == 0  # one algorithm's rows: both presets, no other row
+    assert [{(t.task, t.algo, t.seed) for t in trials} for _, _, trials in calls] == [
+        {("DiscreteArrows-v0", "dqn", 3), ("DiscreteArrows-v0", "dqn", 4)}
+    ] * 2
+    assert main(["benchmark", "--paper", "--algos", "ddpg"]) == 2
+    assert "no Table III rows for ['ddpg']; the algorithms are" in capsys.readouterr().err
+    assert main(["benchmark", "--paper", "--tasks", "DiscreteArrows-v0", "--algos", "td3"]) == 2
+    assert "Table III has no row of ['td3'] on ['DiscreteArrows-v0']" in capsys.readouterr().err
+    assert len(calls) == 2  # nothing ran for the refused ones

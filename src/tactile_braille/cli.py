@@ -523,11 +523,16 @@ def _benchmark(args: argparse.Namespace) -> int:
     if not args.paper:
         raise ValueError("say which benchmark: --paper (the simulated part of the paper's Table III)")
     overrides = _sweep_overrides(args)
-    rows = [(task, algo) for task, algo in PAPER_SIM_RUNS if not args.tasks or task in args.tasks]
-    unknown = set(args.tasks or ()) - {task for task, _ in PAPER_SIM_RUNS}
-    if unknown:
-        raise ValueError(f"no Table III rows for {sorted(unknown)}; the tasks are "
-                         f"{sorted({task for task, _ in PAPER_SIM_RUNS})}")  # fmt: skip
+    for wanted, names, what in ((args.tasks, {t for t, _ in PAPER_SIM_RUNS}, "tasks"),
+                                (args.algos, {a for _, a in PAPER_SIM_RUNS}, "algorithms")):  # fmt: skip
+        if set(wanted or ()) - names:
+            raise ValueError(
+                f"no Table III rows for {sorted(set(wanted) - names)}; the {what} are {sorted(names)}"
+            )
+    rows = [(task, algo) for task, algo in PAPER_SIM_RUNS
+            if (not args.tasks or task in args.tasks) and (not args.algos or algo in args.algos)]  # fmt: skip
+    if not rows:
+        raise ValueError(f"Table III has no row of {args.algos} on {args.tasks}")
     seeds = args.seeds if args.seeds is not None else range(args.num_seeds)
     root, archive, report = Path(args.root), args.archive, args.report
     for preset in args.presets:  # each preset's trials in its own folder (and archive folder)
@@ -810,6 +815,7 @@ def _add_benchmark_command(commands) -> None:
     bench.add_argument("--presets", nargs="+", choices=TRAINING_PRESETS, default=["paper"],
                        help="one sweep per preset, in ROOT/PRESET (and ARCHIVE/PRESET)")  # fmt: skip
     bench.add_argument("--tasks", nargs="+", default=None, help="only these tasks' rows (default: all)")
+    bench.add_argument("--algos", nargs="+", default=None, help="only these algorithms' rows (default: all)")
     bench.add_argument("--num-seeds", type=int, default=5, help="seeds 0..N-1 (the paper's 5)")
     bench.add_argument("--seeds", nargs="+", type=int, default=None, help="these seeds instead")
     bench.add_argument("--report", type=Path, default=None, help="default: ROOT/report; one per preset")
