@@ -507,3 +507,24 @@ def test_exploration_steps_down_once_per_epoch_with_a_schedule_interval(tasks):
     assert staircase.epsilon(10_000) == pytest.approx(0.1)
     td3 = build("td3", tasks, schedule_interval=250, noise_start=1.0, noise_end=0.05)
     assert [td3.noise(s) for s in (249, 250)] == pytest.approx([1.0, 1.0 - 0.95 * 250 / 2000])
+
+
+# ---------------------------------------------------------------- n-step returns
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_a_batch_of_n_step_returns_discounts_its_bootstrap_by_gamma_to_the_steps(tasks, algo):
+    data = make_batch(algo, tasks)
+    data["dones"] = np.zeros_like(data["dones"])  # the bootstrapped values count
+    steps = {**data, "steps": np.full(len(data["rewards"]), 2.0, dtype=np.float32)}
+    torch.manual_seed(1)
+    two_steps = build(algo, tasks, gamma=0.9)
+    losses = two_steps.update(steps)
+    torch.manual_seed(1)
+    squared = build(algo, tasks, gamma=0.81)  # one step with gamma ** 2: the same targets
+    expected = squared.update(data)
+    assert losses == pytest.approx(expected, rel=1e-4)
+    learnt = [agent.q if algo == "dqn" else agent.critics for agent in (two_steps, squared)]
+    parameters, reference = (dict(module.named_parameters()) for module in learnt)
+    assert all(torch.allclose(parameters[name], reference[name], atol=1e-6) for name in parameters)
+    torch.manual_seed(1)
+    plain = build(algo, tasks, gamma=0.9).update(data)
+    assert plain != pytest.approx(losses, rel=1e-4)  # the steps changed the targets

@@ -91,6 +91,7 @@ def test_train_config_rejects(kwargs, message):
         ({"replay": {"relabel": "bogus"}}, "relabel must be one of"),
         ({"start_steps": 9}, "at least 10"),
         ({"touch": {"epochs": 0}}, "TouchConfig.epochs must be at least 1"),
+        ({"replay": {"n_step": 0}}, "ReplayConfig.n_step must be at least 1"),
         ({"touch": {"refits": -1}}, "TouchConfig.refits must be at least 0"),
     ],
 )

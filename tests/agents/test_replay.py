@@ -1096,3 +1096,84 @@ def test_subclasses_still_see_every_frame_stored_through_store_frame():
     assert len(buffer.slots) == buffer.frames_written > buffer.frame_capacity
     slots = np.array(buffer.slots[-buffer.frame_capacity :])
     np.testing.assert_array_equal(buffer.features[slots], block_sums(buffer.store.observations(slots)))
+
+
+# ---------------------------------------------------------------- n-step returns
+def n_step_buffer(n_step: int, relabel: str = "paper", capacity: int = 100, **kwargs) -> EpisodeReplayBuffer:
+    return EpisodeReplayBuffer(capacity, GOALS, (), replay_helpers.PREVIOUS, relabel=relabel,
+                               observation_shape=(FEATURES,), n_step=n_step, gamma=0.5, **kwargs)  # fmt: skip
+
+
+def feature_episode(buffer, goal: int, pressed: int | None, steps: int, first_frame: int) -> None:
+    """An episode whose frames are numbered (each feature vector holds its number) and whose actions
+    are its steps' indices; it ends pressing ``pressed`` (None: a time-out)."""
+    frame = lambda k: np.full(FEATURES, first_frame + k, dtype=np.float32)  # noqa: E731
+    buffer.start_episode(replay_helpers.replay_observation(frame(0), goal))
+    for t in range(steps):
+        last = t == steps - 1
+        achieved = pressed if last else None
+        observation = replay_helpers.replay_observation(frame(t + 1), goal, achieved)
+        buffer.add_step(t, float(last and pressed == goal), observation, last and pressed is not None)
+    buffer.end_episode()
+
+
+@pytest.mark.parametrize("relabel", RELABELLING)
+def test_n_step_returns_sum_their_episodes_rewards_and_stop_at_its_end(relabel):
+    buffer = n_step_buffer(3, relabel)
+    feature_episode(buffer, goal=1, pressed=1, steps=5, first_frame=0)  # right press: frames 0-5
+    feature_episode(buffer, goal=0, pressed=2, steps=4, first_frame=10)  # wrong press: frames 10-14
+    feature_episode(buffer, goal=3, pressed=None, steps=2, first_frame=20)  # time-out: frames 20-22
+    lengths = {0: 5, 10: 4, 20: 2}
+    batch = buffer.sample(4000, np.random.default_rng(0))
+    goals = goal_indices(batch["goals"])
+    for t, first, next_frame, goal, reward, done, steps in zip(
+        batch["actions"], batch["images"][:, 0], batch["next_images"][:, 0], goals,
+        batch["rewards"], batch["dones"], batch["steps"], strict=True,
+    ):  # fmt: skip
+        start = int(first) - t  # the episode's first frame
+        length = lengths[start]
+        span = min(length - 1 - t, 2)  # at most 3 steps, never past the episode's end
+        assert steps == span + 1 and next_frame == first + span + 1
+        reaches_end = t + span == length - 1
+        pressed = {0: 1, 10: 2, 20: None}[start]
+        assert done == float(reaches_end and pressed is not None)
+        assert reward == (0.5**span if reaches_end and pressed == goal else 0.0)
+    assert set(batch["steps"].tolist()) == {1.0, 2.0, 3.0}
+    assert (batch["rewards"] == 0.25).any() and (batch["rewards"] == 1.0).any()  # discounted and not
+
+
+def test_one_step_buffers_sample_and_save_as_before_and_n_step_ones_keep_their_windows(tmp_path):
+    one, three = n_step_buffer(1), n_step_buffer(3)
+    for buffer in (one, three):
+        feature_episode(buffer, goal=1, pressed=1, steps=5, first_frame=0)
+    assert "steps" not in one.sample(8, np.random.default_rng(0))
+    one.save(tmp_path / "one.npz")
+    three.save(tmp_path / "three.npz")
+    with np.load(tmp_path / "one.npz") as data:
+        assert "remaining" not in data.files  # the files one-step runs always wrote
+    restored = n_step_buffer(3)
+    restored.load(tmp_path / "three.npz")
+    np.testing.assert_array_equal(restored.remaining[:5], [4, 3, 2, 1, 0])
+    older = n_step_buffer(3)  # a one-step file in an n-step buffer: one-step windows, always valid
+    older.load(tmp_path / "one.npz")
+    assert (older.sample(64, np.random.default_rng(0))["steps"] == 1).all()
+
+
+def test_n_step_windows_survive_the_ring_wrapping():
+    buffer = n_step_buffer(4, "all", capacity=7)
+    for episode in range(5):  # 3 steps each: the ring wraps and the oldest episodes are overwritten
+        feature_episode(buffer, goal=0, pressed=0, steps=3, first_frame=10 * episode)
+    batch = buffer.sample(500, np.random.default_rng(0))
+    first_frames = batch["images"][:, 0] - batch["actions"]
+    assert set(first_frames.tolist()) <= {20.0, 30.0, 40.0}  # whole episodes kept, 20's partly
+    # Every window ends its episode.
+    np.testing.assert_array_equal(batch["next_images"][:, 0], first_frames + 3)
+
+
+@pytest.mark.parametrize(
+    ("n_step", "gamma", "message"),
+    [(0, 0.5, "n_step must be at least 1"), (2, None, "need the agent's discount")],
+)
+def test_n_step_settings_are_checked(n_step, gamma, message):
+    with pytest.raises(ValueError, match=message):
+        EpisodeReplayBuffer(10, GOALS, (), replay_helpers.PREVIOUS, n_step=n_step, gamma=gamma)

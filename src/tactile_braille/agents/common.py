@@ -87,6 +87,11 @@ class Agent:
             name: torch.as_tensor(value).to(self.device, non_blocking=True) for name, value in batch.items()
         }
 
+    def discount(self, t: dict[str, torch.Tensor]) -> torch.Tensor | float:
+        """The discount of each target's bootstrapped value: ``gamma``, or ``gamma ** steps`` where the
+        batch holds n-step returns (a buffer with ``n_step`` > 1: its batches carry ``steps``)."""
+        return self.config.gamma if "steps" not in t else self.config.gamma ** t["steps"]
+
     def end_epoch(self) -> None:
         """Called by the training loop after each epoch's steps and updates, before its test."""
 

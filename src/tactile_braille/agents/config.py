@@ -277,15 +277,18 @@ class ReplayConfig:
         her: hindsight relabelling.
         relabel: ``"paper"`` (copies of wrong-press episodes, the paper's) or ``"all"`` (every
             transition for every goal, relabelled when sampled; :mod:`~tactile_braille.agents.replay`).
+        n_step: steps of its episode each sampled transition's return spans, discounted by the
+            agent's ``gamma`` (1: one-step targets, the paper's; ours above 1).
     """
 
     capacity: int = 100_000
     her: bool = True
     relabel: RelabelRule = "paper"
+    n_step: int = 1
 
     def __post_init__(self) -> None:
         check_types(self)
-        _at_least(self, 1, "capacity")
+        _at_least(self, 1, "capacity", "n_step")
 
 
 @dataclass(frozen=True)

@@ -93,7 +93,7 @@ class DQNAgent(Agent):
                 next_action = next_online.argmax(dim=-1, keepdim=True)
                 next_target = self.target(t["next_images"], t["goals"], t["next_previous_actions"])
                 next_value = next_target.gather(-1, next_action).squeeze(-1).float()
-                target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
+                target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
             q_all = self.q(t["images"], t["goals"], t["previous_actions"])
             q = q_all.gather(-1, t["actions"][:, None]).squeeze(-1).float()
             loss = F.smooth_l1_loss(q, target) if self.config.loss == "huber" else 0.5 * F.mse_loss(q, target)

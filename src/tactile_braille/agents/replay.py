@@ -38,6 +38,13 @@ that ended in a press of a task key, right or wrong), or a uniformly random
 goal (a press of key k then teaches "not here" for the other goals). No
 copies are stored.
 
+``n_step`` > 1 (ours, not the paper's) makes each sampled transition an
+n-step one: the discounted rewards of up to ``n_step`` steps of its episode
+(under the goal it was sampled with), bootstrapped from the frame after the
+last of them; batches then carry ``steps``, the steps the return spans,
+for a discount of ``gamma ** steps``. A window never crosses its episode's
+end. With the default of 1 batches are as they always were.
+
 Memory at the paper's capacity of 100,000 transitions: the frame ring holds
 twice as many frames as transitions (episodes of one step need two frames
 per transition) plus room for the episode in progress (whose frames are
@@ -253,6 +260,11 @@ class Relabelling:
         rewards, the goal indices of their pressed keys and of their episodes' final keys (-1: none)."""
         return goals, rewards
 
+    def rewards(self, goals: np.ndarray, stored: np.ndarray, achieved: np.ndarray) -> np.ndarray:
+        """Rewards of transitions under the goals :meth:`sampled` gave their batch's transitions (for
+        the later steps of n-step returns): the stored ones, where goals are never rewritten."""
+        return stored
+
 
 class PaperRelabelling(Relabelling):
     """The paper's HER: a wrong-press episode is stored again with the pressed key as its goal."""
@@ -304,7 +316,12 @@ class SampledRelabelling(Relabelling):
         relabelled = np.zeros((batch, goal_size), dtype=np.float32)
         has_goal = goal >= 0
         relabelled[np.flatnonzero(has_goal), goal[has_goal]] = 1.0
-        return relabelled, ((achieved == goal) & has_goal).astype(np.float32)
+        return relabelled, self.rewards(relabelled, rewards, achieved)
+
+    def rewards(self, goals: np.ndarray, stored: np.ndarray, achieved: np.ndarray) -> np.ndarray:
+        """1 where the pressed key is the goal."""
+        goal = np.where(goals.any(-1), goals.argmax(-1), -1)
+        return ((achieved == goal) & (goal >= 0)).astype(np.float32)
 
 
 RELABELLINGS: dict[str, type[Relabelling]] = {"paper": PaperRelabelling, "all": SampledRelabelling}
@@ -341,6 +358,9 @@ class EpisodeReplayBuffer:
             by default), ``(n,)`` for feature vectors.
         poses: batches also carry the labelled sensor poses (x, y, depth in mm) of
             both frames, ``poses`` and ``next_poses``, for asymmetric critics.
+        n_step: steps of an episode a sampled transition's return spans (1: one-step
+            transitions, the paper's); above 1 its rewards are discounted by ``gamma``.
+        gamma: the agent's discount, needed where ``n_step`` > 1.
     """
 
     def __init__(
@@ -356,7 +376,14 @@ class EpisodeReplayBuffer:
         relabel_random: float = 0.4,
         observation_shape: tuple[int, ...] = (100, 100, 1),
         poses: bool = False,
+        n_step: int = 1,
+        gamma: float | None = None,
     ) -> None:
+        if n_step < 1:
+            raise ValueError(f"n_step must be at least 1, got {n_step}")
+        if n_step > 1 and (gamma is None or not 0 <= gamma <= 1):
+            raise ValueError(f"n-step returns (n_step={n_step}) need the agent's discount gamma in [0, 1], "
+                             f"got {gamma}")  # fmt: skip
         if capacity < 1:
             raise ValueError(f"capacity must be at least 1, got {capacity}")
         if max_episode_steps < 1:
@@ -370,6 +397,7 @@ class EpisodeReplayBuffer:
             )
         self.capacity = int(capacity)
         self.poses = bool(poses)
+        self.n_step, self.gamma = int(n_step), gamma
         self.her = her
         self.relabel = relabel
         self.relabel_final, self.relabel_random = float(relabel_final), float(relabel_random)
@@ -390,6 +418,7 @@ class EpisodeReplayBuffer:
         # Goal index of the key pressed at the step, and at the end of its episode (-1: none).
         self.achieved = np.full(self.capacity, -1, dtype=np.int16)
         self.finals = np.full(self.capacity, -1, dtype=np.int16)
+        self.remaining = np.zeros(self.capacity, dtype=np.int16)  # steps after it in its episode
         self.next_slot = 0
         self.size = 0
         # The episode in progress.
@@ -484,18 +513,20 @@ class EpisodeReplayBuffer:
     def end_episode(self) -> None:
         """Commit the episode's transitions, and those its relabelling adds (the paper's HER)."""
         final = _goal_index(self._episode[-1].achieved) if self._episode else -1
-        for step in self._episode:
-            self._add(step, step.goal, step.reward, final)
-        for step, goal, reward in self.relabelling.episode_end(self._episode):
-            self._add(step, goal, reward, final)
+        last = len(self._episode) - 1
+        for i, step in enumerate(self._episode):
+            self._add(step, step.goal, step.reward, final, last - i)
+        for i, (step, goal, reward) in enumerate(self.relabelling.episode_end(self._episode)):
+            self._add(step, goal, reward, final, last - i)  # a copy of the whole episode
         self._episode = []
         self._current_frame = -1
         self.store.commit()
 
-    def _add(self, step: Step, goal: np.ndarray, reward: float, final: int) -> None:
+    def _add(self, step: Step, goal: np.ndarray, reward: float, final: int, remaining: int) -> None:
         slot = self.next_slot
         self.achieved[slot] = _goal_index(step.achieved)
         self.finals[slot] = final
+        self.remaining[slot] = remaining
         self.frame_index[slot] = step.frames
         self.previous_actions[slot, 0] = step.previous[0]
         self.previous_actions[slot, 1] = step.previous[1]
@@ -512,10 +543,13 @@ class EpisodeReplayBuffer:
         if self.size == 0:
             raise RuntimeError("the replay buffer is empty")
         index = rng.integers(self.size, size=batch_size)
-        frames = self.frame_index[index]
         goals, rewards = self.relabelling.sampled(
             self.goals[index], self.rewards[index], self.achieved[index], self.finals[index], rng
         )
+        last = index  # the transition whose next frame the target bootstraps from
+        if self.n_step > 1:
+            rewards, last, steps = self._n_step_returns(index, goals, rewards)
+        frames = np.stack([self.frame_index[index, 0], self.frame_index[last, 1]], axis=1)
         observations = self.store.observations if self.cache.features is None else self.cache.lookup
         batch = {
             "images": observations(frames[:, 0]),
@@ -524,15 +558,36 @@ class EpisodeReplayBuffer:
             "actions": self.actions[index],
             "rewards": rewards,
             "next_images": observations(frames[:, 1]),
-            "next_previous_actions": self.previous_actions[index, 1],
-            "dones": self.dones[index],
+            "next_previous_actions": self.previous_actions[last, 1],
+            "dones": self.dones[last],
         }
+        if self.n_step > 1:
+            batch["steps"] = steps
         if self.poses:
             poses = self.store.labels[frames, :3]  # (B, 2, 3)
             if np.isnan(poses).any():
                 raise RuntimeError("poses=True needs labelled frames, but a sampled frame has no labels")
             batch["poses"], batch["next_poses"] = poses[:, 0], poses[:, 1]
         return batch
+
+    def _n_step_returns(
+        self, index: np.ndarray, goals: np.ndarray, rewards: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Returns over up to ``n_step`` steps of each sampled transition's episode, under its batch
+        goal; the index of each window's last transition; and the steps each spans (float32).
+
+        An episode's transitions (and each relabelled copy of it) lie one after another in the ring,
+        newer than their first, so a window's later transitions are still stored."""
+        span = np.minimum(self.remaining[index].astype(np.int64), self.n_step - 1)
+        returns = rewards.astype(np.float32).copy()
+        for j in range(1, self.n_step):
+            within = span >= j
+            if not within.any():
+                break
+            later = (index[within] + j) % self.capacity
+            reward = self.relabelling.rewards(goals[within], self.rewards[later], self.achieved[later])
+            returns[within] += np.float32(self.gamma**j) * reward
+        return returns, (index + span) % self.capacity, (span + 1).astype(np.float32)
 
     def set_encoder(self, encode: Encoder, size: int, batch_size: int = 1024) -> None:
         """From now on, batches hold ``encode``'s features of the stored images (recomputed now).
@@ -576,9 +631,15 @@ class EpisodeReplayBuffer:
     _TRANSITIONS = (
         "frame_index", "previous_actions", "goals", "actions", "rewards", "dones", "achieved", "finals",
     )  # fmt: skip
-    _ADDED_LATER: ClassVar[dict[str, int]] = {"achieved": -1, "finals": -1}
-    """Transition arrays that older buffers lack, and their fill value (no key known); older buffers'
-    frames have no labels."""
+    _ADDED_LATER: ClassVar[dict[str, int]] = {"achieved": -1, "finals": -1, "remaining": 0}
+    """Transition arrays that older buffers lack, and their fill value (no key known; no step after it:
+    one-step returns, always valid); older buffers' frames have no labels."""
+
+    @property
+    def _saved(self) -> tuple[str, ...]:
+        """The transition arrays a checkpoint holds: ``remaining`` only where n-step returns read it,
+        so that one-step buffers write the files they always wrote."""
+        return self._TRANSITIONS + (("remaining",) if self.n_step > 1 else ())
 
     def save(self, path: str | Path) -> None:
         """Write the used part of the buffer (committed transitions) atomically as ``.npz``.
@@ -588,7 +649,7 @@ class EpisodeReplayBuffer:
         whole slack of the frame ring for its next episode.
         """
         (next_frame, frames_written), frames = self.store.checkpoint()
-        transitions = {name: getattr(self, name)[: self.size] for name in self._TRANSITIONS}
+        transitions = {name: getattr(self, name)[: self.size] for name in self._saved}
         with atomic_path(path, fsync=True) as temporary, open(temporary, "wb") as handle:
             np.savez(
                 handle,
@@ -607,7 +668,7 @@ class EpisodeReplayBuffer:
             size = counters[3]
             transitions = {
                 name: data[name] if name in data else np.full(size, self._ADDED_LATER[name], dtype=np.int16)
-                for name in self._TRANSITIONS
+                for name in (*self._TRANSITIONS, "remaining")
             }
             for name, array in transitions.items():
                 mine = getattr(self, name)

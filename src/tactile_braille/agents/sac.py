@@ -107,7 +107,7 @@ class SACAgent(Agent):
                     *(target(*next_state, next_actions, *next_poses) for target in self.targets)
                 )
                 next_value = next_q - alpha * next_log_probs
-                target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
+                target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
             critic_loss = sum(
                 F.mse_loss(critic(*state, t["actions"], *poses), target) for critic in self.critics
             )

@@ -96,7 +96,7 @@ class DiscreteSACAgent(Agent):
                 next_probs, next_log_probs = self.actor(*next_state)
                 next_q = torch.min(*(target(*next_state) for target in self.targets)).float()
                 next_value = (next_probs * (next_q - alpha * next_log_probs)).sum(-1)
-                target = t["rewards"] + self.config.gamma * (1.0 - t["dones"]) * next_value
+                target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
             q_values = [critic(*state).float() for critic in self.critics]
             taken = t["actions"][:, None]
             critic_loss = sum(F.mse_loss(q.gather(-1, taken).squeeze(-1), target) for q in q_values)

@@ -123,7 +123,7 @@ class TD3Agent(Agent):
                 next_q = torch.min(
                     *(target(*next_state, next_actions, *next_poses) for target in self.critic_targets)
                 )
-                target = t["rewards"] + config.gamma * (1.0 - t["dones"]) * next_q
+                target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_q
             q_values = [critic(*state, t["actions"], *poses) for critic in self.critics]
             critic_loss = sum(F.mse_loss(q, target) for q in q_values)
         self.critic_optimiser.zero_grad(set_to_none=True)

@@ -294,4 +294,6 @@ def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
         relabel=config.replay.relabel,
         observation_shape=spaces["observation"].shape,
         poses=getattr(config.agent, "critic_pose", False),
+        n_step=config.replay.n_step,
+        gamma=config.agent.gamma,
     )
