@@ -14,11 +14,13 @@ from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
     bootstrap_ci,
+    compared_groups,
     grid_label,
     group,
     iqm,
     load_records,
     original_curves,
+    plot_by_task,
     results_table,
     source_world,
     transfer_table,
@@ -271,3 +273,16 @@ def test_a_run_with_frame_noise_names_it_in_its_variant():
     config = preset_config("fast", f"tactile_braille/{task}", "sac", backend="render", frame_noise=(1.0, 2.0))
     run = RunRecord(path="runs/0", task=task, algo="sac", seed=0, returns=np.zeros(2), config=config)
     assert run.variant == "fast, fp32, render backend, frame noise 1 mm, 2 deg"
+
+
+def test_the_by_task_figure_draws_rows_of_five_seeds_or_more(tmp_path):
+    five = [record("DiscreteArrows-v0", "dqn", seed, [0.5, 0.96, 1.0], 1.0, 240) for seed in range(5)]
+    three = [record("DiscreteArrows-v0", "sac_discrete", seed, [0.0, 0.5], 0.5, 400) for seed in range(3)]
+    alphabet = [record("DiscreteAlphabet-v0", "dqn", seed, [0.1, 0.2], 0.2, 1900) for seed in range(6)]
+    groups = group(five + three + alphabet)
+    compared = compared_groups(groups)
+    assert list(compared) == ["DiscreteArrows-v0", "DiscreteAlphabet-v0"]
+    assert [(algo, len(runs)) for algo, _, runs in compared["DiscreteArrows-v0"]] == [("dqn", 5)]
+    assert plot_by_task(groups, tmp_path / "by_task.png").read_bytes()[:4] == b"\x89PNG"
+    assert plot_by_task(group(three), tmp_path / "none.png") is None  # an ablation alone: no figure
+    assert not (tmp_path / "none.png").exists()

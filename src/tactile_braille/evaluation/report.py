@@ -597,6 +597,79 @@ def _run_line(record: RunRecord) -> str:
     return line + (f" (reset per key: {reset['accuracy']:.3f} in {reset['total_steps']})" if reset else "")
 
 
+COMPARED_SEEDS = 5
+"""Seeds a group needs to be drawn in :func:`plot_by_task`: the paper's, and the benchmark's rows'."""
+
+
+def compared_groups(groups: dict[tuple[str, str, str], list[RunRecord]]) -> dict[str, list[tuple]]:
+    """Task -> [(algo, variant, records)] of the groups :func:`plot_by_task` draws: those with at least
+    :data:`COMPARED_SEEDS` seeds, in the groups' order."""
+    tasks: dict[str, list[tuple]] = {}
+    for (task, algo, variant), records in groups.items():
+        if len(records) >= COMPARED_SEEDS:
+            tasks.setdefault(task, []).append((algo, variant, records))
+    return tasks
+
+
+def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str | Path) -> Path | None:
+    """One panel per task: the mean test return of every group of that task run with at least
+    :data:`COMPARED_SEEDS` seeds (its seed range shaded), solid for the ``tactile`` track and dashed
+    for ``proprio``, over the original release's logged runs. Fewer-seed groups (ablations, tuning)
+    are left to :func:`plot_curves`. None (and nothing written) where no group has the seeds."""
+    from tactile_braille._figures import new_figure, save_figure
+
+    tasks = compared_groups(groups)
+    if not tasks:
+        return None
+    originals = original_curves()
+    columns = min(len(tasks), 2)
+    rows = int(np.ceil(len(tasks) / columns))
+    fig, axes = new_figure(rows, columns, figsize=(7.0 * columns, 4.4 * rows))
+    for ax, (task, members) in zip(axes.ravel(), tasks.items(), strict=False):
+        longest = max(len(r.returns) for _, _, records in members for r in records)
+        for index, (algo, variant, records) in enumerate(members):
+            length = min(len(r.returns) for r in records)
+            curves, epochs = np.stack([r.returns[:length] for r in records]), np.arange(1, length + 1)
+            reached = [r.reached_095 for r in records]
+            first = f"first 0.95 at {np.mean(reached):.1f}" if None not in reached else \
+                f"{sum(e is not None for e in reached)}/{len(reached)} seeds reach 0.95"  # fmt: skip
+            colour, style = f"C{index % 10}", "-" if records[0].track == "tactile" else "--"
+            ax.fill_between(epochs, curves.min(0), curves.max(0), color=colour, alpha=0.1)
+            ax.plot(epochs, curves.mean(0), color=colour, ls=style, lw=1.8,
+                    label=f"{_label(algo, variant)}, {records[0].track}: {first}")  # fmt: skip
+        logged = sorted({algo for algo, _, _ in members})
+        for (shade, dashes), algo in zip((("black", ":"), ("dimgrey", "-.")), logged, strict=False):
+            original = originals.get(("sim", task, algo))
+            if original is not None:
+                shown = original[0] < longest * 1.2
+                ax.plot(original[0][shown] + 1, original[1][shown], color=shade, lw=1, ls=dashes,
+                        label=f"{ALGO_NAMES[algo]}, original release's log (sim, seed 1)")  # fmt: skip
+        paper = [f"{ALGO_NAMES[a]} {PAPER_TABLE[('sim', task, a)][2]}" for a in ALGO_NAMES
+                 if ("sim", task, a) in PAPER_TABLE]  # fmt: skip
+        ax.axhline(0.95, color="grey", lw=0.6)
+        ax.set_title(f"{task} (paper's convergence epochs: {', '.join(paper)})", fontsize=9)
+        ax.set_xlabel("epoch (250 steps)")
+        ax.set_ylabel(f"test return, mean of {COMPARED_SEEDS}+ seeds")
+        ax.set_ylim(-0.05, 1.05)
+        ax.legend(fontsize=6.5, loc="lower right")
+    for ax in axes.ravel()[len(tasks) :]:
+        ax.axis("off")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def _by_task_section(groups: dict, figures: Path, link: str, written: set[str]) -> list[str]:
+    """The report's lines on :func:`plot_by_task`'s figure (none where it draws nothing)."""
+    if plot_by_task(groups, figures / "by_task.png") is None:
+        return []
+    written.add("by_task.png")
+    return [
+        f"Each task's rows of {COMPARED_SEEDS} or more seeds side by side (means, seed ranges shaded; "
+        "dashed: the `proprio` track), over the original release's logged runs:", "",
+        f"![curves by task]({link}by_task.png)", "",
+    ]  # fmt: skip
+
+
 def write_report(
     run_dirs,
     output: str | Path,
@@ -650,6 +723,7 @@ def write_report(
         "", results_table(groups), "", *([notes.strip(), ""] if notes else []),
         f"![training curves]({link}curves.png)", "",
     ]  # fmt: skip
+    lines += _by_task_section(groups, figures, link, written)
     lines += _transfer_section(transfer_dirs) + _warm_start_section(warm_dirs, groups, figures, link, written)
     for (task, algo, variant), records in groups.items():
         name = f"{task.split('-')[0]}__{algo}" + (
