@@ -455,9 +455,7 @@ def plot_warm_starts(warm: dict, cold: dict, path: str | Path) -> Path:
         for members, colour, name in ((records, "C0", "warm start"), (scratch, "C1", "from scratch")):
             if not members:
                 continue
-            length = min(len(r.returns) for r in members)
-            curves = np.stack([r.returns[:length] for r in members])
-            epochs = np.arange(1, length + 1)
+            epochs, curves = seed_curves(members)
             ax.fill_between(epochs, curves.min(0), curves.max(0), color=colour, alpha=0.15)
             ax.plot(epochs, curves.mean(0), color=colour, lw=2, label=f"{name}: mean of {len(members)} seeds")
         ax.axvline(0.5, color="black", lw=0.6, ls=":")
@@ -503,6 +501,13 @@ def _bound_cell(values: list[float | None]) -> str:
 
 
 # ------------------------------------------------------------------ figures
+def seed_curves(records: list[RunRecord]) -> tuple[np.ndarray, np.ndarray]:
+    """(epochs, seeds x epochs test returns) over the epochs every record ran; epoch 1 ends after the
+    first 250 steps, as in the paper."""
+    length = min(len(r.returns) for r in records)
+    return np.arange(1, length + 1), np.stack([r.returns[:length] for r in records])
+
+
 def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str | Path) -> Path:
     """Test return per epoch for each group: seeds, their mean and range, convergence, the original run."""
     from tactile_braille._figures import new_figure, save_figure
@@ -513,9 +518,7 @@ def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str |
     rows = int(np.ceil(count / columns))
     fig, axes = new_figure(rows, columns, figsize=(6.2 * columns, 3.6 * rows))
     for ax, ((task, algo, variant), records) in zip(axes.ravel(), groups.items(), strict=False):
-        length = min(len(r.returns) for r in records)
-        curves = np.stack([r.returns[:length] for r in records])
-        epochs = np.arange(1, length + 1)  # epoch 1 ends after the first 250 steps, as in the paper
+        epochs, curves = seed_curves(records)
         for record in records:
             ax.plot(np.arange(1, len(record.returns) + 1), record.returns, lw=0.7, alpha=0.45)
         ax.fill_between(epochs, curves.min(0), curves.max(0), alpha=0.2, label="seed range")
@@ -526,7 +529,7 @@ def plot_curves(groups: dict[tuple[str, str, str], list[RunRecord]], path: str |
                        label=f"convergence (paper's rule): {np.mean(convergence):.1f}")  # fmt: skip
         original = originals.get(("sim", task, algo))
         if original is not None:
-            shown = original[0] < max(length * 1.5, 10)
+            shown = original[0] < max(len(epochs) * 1.5, 10)
             ax.plot(original[0][shown] + 1, original[1][shown], color="black", lw=1, ls=":",
                     label="original release (sim, seed 1)")  # fmt: skip
         paper = PAPER_TABLE.get(("sim", task, algo))
@@ -628,8 +631,7 @@ def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str 
     for ax, (task, members) in zip(axes.ravel(), tasks.items(), strict=False):
         longest = max(len(r.returns) for _, _, records in members for r in records)
         for index, (algo, variant, records) in enumerate(members):
-            length = min(len(r.returns) for r in records)
-            curves, epochs = np.stack([r.returns[:length] for r in records]), np.arange(1, length + 1)
+            epochs, curves = seed_curves(records)
             reached = [r.reached_095 for r in records]
             first = f"first 0.95 at {np.mean(reached):.1f}" if None not in reached else \
                 f"{sum(e is not None for e in reached)}/{len(reached)} seeds reach 0.95"  # fmt: skip
