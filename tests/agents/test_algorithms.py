@@ -528,3 +528,49 @@ def test_a_batch_of_n_step_returns_discounts_its_bootstrap_by_gamma_to_the_steps
     torch.manual_seed(1)
     plain = build(algo, tasks, gamma=0.9).update(data)
     assert plain != pytest.approx(losses, rel=1e-4)  # the steps changed the targets
+
+
+# ---------------------------------------------------------------- every goal at once
+def test_goal_heads_pick_the_goals_row_of_every_goals_values(tasks):
+    agent = build("dqn", tasks, all_goals=True)
+    images, goals, previous = state_inputs(agent, make_batch("dqn", tasks))
+    with torch.no_grad():
+        every = agent.q.every_goal(images, previous)
+        chosen = agent.q(images, goals, previous)
+    assert every.shape == (len(goals), goals.shape[1], agent.num_actions)
+    assert torch.allclose(chosen, every[torch.arange(len(goals)), goals.argmax(-1)])
+    with pytest.raises(ValueError, match="goal_heads=True"):
+        build("dqn", tasks).q.every_goal(images, previous)
+
+
+def test_an_all_goals_update_is_the_single_goal_update_repeated_for_every_goal(tasks):
+    """The all-goals targets under goal g are those of the batch relabelled to g, rewarded where
+    its pressed key is g; and the loss averages every goal's squared error."""
+    data = make_batch("dqn", tasks)
+    goals = data["goals"].shape[1]
+    data["achieved"] = np.array([-1, 0, 3, -1, 3, 5, -1, 1])  # some presses, some moves
+    agent = build("dqn", tasks, all_goals=True)
+    agent.target.load_state_dict(build("dqn", tasks, seed=1, all_goals=True).q.state_dict())
+    t = agent.tensors(data)
+    with torch.no_grad():
+        q_every, target_every = agent._all_goals_values(t)
+        for g in range(goals):
+            relabelled = {**data, "goals": np.tile(np.eye(goals, dtype=np.float32)[g], (8, 1)),
+                          "rewards": (data["achieved"] == g).astype(np.float32)}  # fmt: skip
+            q, target = agent._values(agent.tensors(relabelled))
+            assert torch.allclose(q_every[:, g], q, atol=1e-6)
+            assert torch.allclose(target_every[:, g], target, atol=1e-6)
+    assert target_every[1, 0] > target_every[1, 1]  # the press of key 0 pays goal 0 only
+    expected = 0.5 * ((q_every - target_every) ** 2).mean()
+    assert agent.update(data)["losses/q_loss"] == pytest.approx(float(expected), rel=1e-5)
+
+
+def test_all_goals_is_refused_with_n_step_returns_or_goal_positions():
+    from tactile_braille.agents.config import TrainConfig
+
+    base = {"task": "tactile_braille/DiscreteAlphabet-v0", "algo": "dqn", "agent": {"all_goals": True}}
+    assert TrainConfig(**base).agent.all_goals  # a tactile-track setting: the run is made
+    with pytest.raises(ValueError, match=r"replay\.n_step=1"):
+        TrainConfig(**base, replay={"n_step": 3})
+    with pytest.raises(ValueError, match=r"turn touch\.goal_positions off"):
+        TrainConfig(**base, track="proprio", touch={"enabled": True, "goal_positions": True})

@@ -52,8 +52,9 @@ class DQNAgent(Agent):
         goal_size, previous_size = spaces_sizes(observation_space)
         _, options = network_options(observation_space, self.config)
         self.q = DuelingQNetwork(
-            self.num_actions, goal_size, previous_size, self.config.hidden, **options
-        ).to(self.device)
+            self.num_actions, goal_size, previous_size, self.config.hidden,
+            goal_heads=self.config.all_goals, **options,
+        ).to(self.device)  # fmt: skip
         self.target = copy.deepcopy(self.q).requires_grad_(False)
         self.optimiser = adam(self.q.parameters(), self.config.learning_rate, self.config.adam_eps)
 
@@ -88,14 +89,7 @@ class DQNAgent(Agent):
         """One gradient step on a batch from the replay buffer; returns losses."""
         t = self.tensors(batch)
         with self.autocast():
-            with torch.no_grad():
-                next_online = self.q(t["next_images"], t["goals"], t["next_previous_actions"])
-                next_action = next_online.argmax(dim=-1, keepdim=True)
-                next_target = self.target(t["next_images"], t["goals"], t["next_previous_actions"])
-                next_value = next_target.gather(-1, next_action).squeeze(-1).float()
-                target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
-            q_all = self.q(t["images"], t["goals"], t["previous_actions"])
-            q = q_all.gather(-1, t["actions"][:, None]).squeeze(-1).float()
+            q, target = self._all_goals_values(t) if self.config.all_goals else self._values(t)
             loss = F.smooth_l1_loss(q, target) if self.config.loss == "huber" else 0.5 * F.mse_loss(q, target)
         self.optimiser.zero_grad(set_to_none=True)
         loss.backward()
@@ -103,6 +97,32 @@ class DQNAgent(Agent):
         if self.config.target_update == "update":
             soft_update(self.q, self.target, self.config.tau)
         return {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
+
+    def _values(self, t: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Q of the batch's actions under its goals, and their double-DQN targets, shape (B,)."""
+        with torch.no_grad():
+            next_online = self.q(t["next_images"], t["goals"], t["next_previous_actions"])
+            next_action = next_online.argmax(dim=-1, keepdim=True)
+            next_target = self.target(t["next_images"], t["goals"], t["next_previous_actions"])
+            next_value = next_target.gather(-1, next_action).squeeze(-1).float()
+            target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
+        q_all = self.q(t["images"], t["goals"], t["previous_actions"])
+        return q_all.gather(-1, t["actions"][:, None]).squeeze(-1).float(), target
+
+    def _all_goals_values(self, t: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """The same under every goal, shape (B, goals): the reward of goal g is 1 where the
+        transition pressed key g (``achieved``, -1 for none), and the end does not depend on g."""
+        with torch.no_grad():
+            next_online = self.q.every_goal(t["next_images"], t["next_previous_actions"])
+            next_action = next_online.argmax(dim=-1, keepdim=True)
+            next_target = self.target.every_goal(t["next_images"], t["next_previous_actions"])
+            next_value = next_target.gather(-1, next_action).squeeze(-1).float()
+            goals = torch.arange(self.q.goal_size, device=self.device)
+            rewards = (t["achieved"][:, None] == goals).float()
+            target = rewards + (self.discount(t) * (1.0 - t["dones"]))[..., None] * next_value
+        q_all = self.q.every_goal(t["images"], t["previous_actions"])
+        actions = t["actions"][:, None, None].expand(-1, self.q.goal_size, 1)
+        return q_all.gather(-1, actions).squeeze(-1).float(), target
 
     def end_epoch(self) -> None:
         """The released code's target update: once per epoch, ``tau`` of the way to the online net."""

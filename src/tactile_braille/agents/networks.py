@@ -101,12 +101,18 @@ def _small_head(inputs: int, outputs: int) -> nn.Linear:
 class DuelingQNetwork(nn.Module):
     """Q-values of discrete actions with a dueling head: ``Q = V + A - mean(A)``.
 
+    With ``goal_heads`` the goal does not join the trunk: the heads give every goal's
+    values at once (``V`` per goal, ``A`` per goal and action), and the goal one-hot
+    picks its row. The values of one observation under all goals then cost one pass
+    (:meth:`every_goal`), which is what an update on every goal needs.
+
     Args:
         num_actions: discrete actions.
         goal_size: length of the goal one-hot.
         previous_action_size: length of the previous-action vector.
         hidden: units of the dense layers (the paper's 512).
         encoder: an encoder to share (detached), or None.
+        goal_heads: heads for every goal instead of the goal as an input.
         options: ``features`` and ``layer_norm`` of :class:`GoalConditionedTrunk`.
     """
 
@@ -117,19 +123,34 @@ class DuelingQNetwork(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        goal_heads: bool = False,
         **options,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
-        self.value = _small_head(self.trunk.features, 1)
-        self.advantage = _small_head(self.trunk.features, num_actions)
+        self.goal_heads, self.goal_size, self.num_actions = goal_heads, goal_size, num_actions
+        vector_size = previous_action_size if goal_heads else goal_size + previous_action_size
+        heads = goal_size if goal_heads else 1
+        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
+        self.value = _small_head(self.trunk.features, heads)
+        self.advantage = _small_head(self.trunk.features, heads * num_actions)
 
     def forward(
         self, images: torch.Tensor, goals: torch.Tensor, previous_actions: torch.Tensor
     ) -> torch.Tensor:
+        if self.goal_heads:
+            every = self.every_goal(images, previous_actions)
+            return (every * goals.to(every.dtype)[..., None]).sum(dim=1)
         hidden = self.trunk(images, goals, previous_actions)
         advantage = self.advantage(hidden)
         return self.value(hidden) + advantage - advantage.mean(dim=-1, keepdim=True)
+
+    def every_goal(self, images: torch.Tensor, previous_actions: torch.Tensor) -> torch.Tensor:
+        """Q-values under every goal, shape (B, goal_size, num_actions); needs ``goal_heads``."""
+        if not self.goal_heads:
+            raise ValueError("every_goal needs a network built with goal_heads=True")
+        hidden = self.trunk(images, previous_actions)
+        advantage = self.advantage(hidden).unflatten(-1, (self.goal_size, self.num_actions))
+        return self.value(hidden)[..., None] + advantage - advantage.mean(dim=-1, keepdim=True)
 
 
 class PolicyNetwork(nn.Module):

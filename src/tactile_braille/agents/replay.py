@@ -560,6 +560,7 @@ class EpisodeReplayBuffer:
             "next_images": observations(frames[:, 1]),
             "next_previous_actions": self.previous_actions[last, 1],
             "dones": self.dones[last],
+            "achieved": self.achieved[last].astype(np.int64),  # the pressed key's goal index, -1: none
         }
         if self.n_step > 1:
             batch["steps"] = steps
