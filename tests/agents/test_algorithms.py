@@ -531,26 +531,33 @@ def test_a_batch_of_n_step_returns_discounts_its_bootstrap_by_gamma_to_the_steps
 
 
 # ---------------------------------------------------------------- every goal at once
-def test_goal_heads_pick_the_goals_row_of_every_goals_values(tasks):
-    agent = build("dqn", tasks, all_goals=True)
+@pytest.mark.parametrize("goal_heads", [False, True])
+def test_every_goals_values_hold_each_goals_own(tasks, goal_heads):
+    agent = build("dqn", tasks, goal_heads=goal_heads)
     images, goals, previous = state_inputs(agent, make_batch("dqn", tasks))
     with torch.no_grad():
         every = agent.q.every_goal(images, previous)
         chosen = agent.q(images, goals, previous)
-    assert every.shape == (len(goals), goals.shape[1], agent.num_actions)
-    assert torch.allclose(chosen, every[torch.arange(len(goals)), goals.argmax(-1)])
-    with pytest.raises(ValueError, match="goal_heads=True"):
-        build("dqn", tasks).q.every_goal(images, previous)
+        assert every.shape == (len(goals), goals.shape[1], agent.num_actions)
+        assert torch.allclose(chosen, every[torch.arange(len(goals)), goals.argmax(-1)], atol=1e-6)
+        other = torch.roll(goals, 1, dims=-1)
+        assert torch.allclose(
+            agent.q(images, other, previous), every[torch.arange(len(goals)), other.argmax(-1)]
+        )
+    assert agent.q.trunk.dense[0].in_features == 5184 + previous.shape[1] + (
+        0 if goal_heads else goals.shape[1]
+    )
 
 
-def test_an_all_goals_update_is_the_single_goal_update_repeated_for_every_goal(tasks):
+@pytest.mark.parametrize("goal_heads", [False, True])
+def test_an_all_goals_update_is_the_single_goal_update_repeated_for_every_goal(tasks, goal_heads):
     """The all-goals targets under goal g are those of the batch relabelled to g, rewarded where
     its pressed key is g; and the loss averages every goal's squared error."""
     data = make_batch("dqn", tasks)
     goals = data["goals"].shape[1]
     data["achieved"] = np.array([-1, 0, 3, -1, 3, 5, -1, 1])  # some presses, some moves
-    agent = build("dqn", tasks, all_goals=True)
-    agent.target.load_state_dict(build("dqn", tasks, seed=1, all_goals=True).q.state_dict())
+    agent = build("dqn", tasks, all_goals=True, goal_heads=goal_heads)
+    agent.target.load_state_dict(build("dqn", tasks, seed=1, goal_heads=goal_heads).q.state_dict())
     t = agent.tensors(data)
     with torch.no_grad():
         q_every, target_every = agent._all_goals_values(t)
@@ -572,5 +579,7 @@ def test_all_goals_is_refused_with_n_step_returns_or_goal_positions():
     assert TrainConfig(**base).agent.all_goals  # a tactile-track setting: the run is made
     with pytest.raises(ValueError, match=r"replay\.n_step=1"):
         TrainConfig(**base, replay={"n_step": 3})
-    with pytest.raises(ValueError, match=r"turn touch\.goal_positions off"):
-        TrainConfig(**base, track="proprio", touch={"enabled": True, "goal_positions": True})
+    touch = {"enabled": True, "goal_positions": True}
+    for name in ("all_goals", "goal_heads"):
+        with pytest.raises(ValueError, match=rf"agent\.{name} reads the goal as a one-hot alone"):
+            TrainConfig(**{**base, "agent": {name: True}}, track="proprio", touch=touch)

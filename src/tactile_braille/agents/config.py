@@ -107,10 +107,11 @@ class DQNConfig:
         batch_size: transitions per update.
         hidden: units of the dense layers after the encoder.
         layer_norm: LayerNorm in the Q-network's dense layers (as DroQ's critics).
-        all_goals: every update teaches every goal (Kaelbling's all-goals update): the network
-            has heads for every goal, and each sampled transition's target is computed for each
-            goal from its pressed key (the achieved goal, an observation) and the reward rule;
+        all_goals: every update teaches every goal (Kaelbling's all-goals update): each sampled
+            transition's target is computed for each goal from its pressed key (the achieved goal, an observation) and the reward rule;
             the episode's end does not depend on the goal. ``False``: the sampled goal only.
+        goal_heads: the goal picks one of the Q-network's heads (one per goal) instead of
+            joining its dense layers as an input (the paper's).
     """
 
     gamma: float = 0.95
@@ -128,6 +129,7 @@ class DQNConfig:
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
     all_goals: bool = False
+    goal_heads: bool = False
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
@@ -446,15 +448,17 @@ class TrainConfig:
         self._check_track()
 
     def _check_all_goals(self) -> None:
-        if not getattr(self.agent, "all_goals", False):
-            return
-        if self.replay.n_step > 1:
+        every = {name: getattr(self.agent, name, False) for name in ("all_goals", "goal_heads")}
+        if every["all_goals"] and self.replay.n_step > 1:
             raise ValueError(
                 f"agent.all_goals computes one-step targets for every goal: set replay.n_step=1, "
                 f"not {self.replay.n_step}"
             )
-        if self.touch.goal_positions:
-            raise ValueError("agent.all_goals gives every goal its own head: turn touch.goal_positions off")
+        for name, wanted in every.items():
+            if wanted and self.touch.goal_positions:
+                raise ValueError(
+                    f"agent.{name} reads the goal as a one-hot alone: turn touch.goal_positions off"
+                )
 
     def _check_track(self) -> None:
         outside = proprio_settings(self) if self.track == "tactile" else {}

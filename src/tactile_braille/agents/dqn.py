@@ -53,7 +53,7 @@ class DQNAgent(Agent):
         _, options = network_options(observation_space, self.config)
         self.q = DuelingQNetwork(
             self.num_actions, goal_size, previous_size, self.config.hidden,
-            goal_heads=self.config.all_goals, **options,
+            goal_heads=self.config.goal_heads, **options,
         ).to(self.device)  # fmt: skip
         self.target = copy.deepcopy(self.q).requires_grad_(False)
         self.optimiser = adam(self.q.parameters(), self.config.learning_rate, self.config.adam_eps)

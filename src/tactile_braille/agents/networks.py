@@ -80,14 +80,16 @@ class GoalConditionedTrunk(nn.Module):
         self.dense.apply(he_init)
         self.features = sizes[-1]
 
-    def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:
+    def encode(self, images: torch.Tensor) -> torch.Tensor:
+        """The features the dense layers take before the vectors: the encoder's, or the vector given."""
         if self._shared:
-            features = self._shared[0](images).detach()
-        elif self.encoder is not None:
-            features = self.encoder(images)
-        else:
-            features = images.float()
-        return self.dense(torch.cat([features, *vectors], dim=-1))
+            return self._shared[0](images).detach()
+        if self.encoder is not None:
+            return self.encoder(images)
+        return images.float()
+
+    def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:
+        return self.dense(torch.cat([self.encode(images), *vectors], dim=-1))
 
 
 def _small_head(inputs: int, outputs: int) -> nn.Linear:
@@ -103,8 +105,8 @@ class DuelingQNetwork(nn.Module):
 
     With ``goal_heads`` the goal does not join the trunk: the heads give every goal's
     values at once (``V`` per goal, ``A`` per goal and action), and the goal one-hot
-    picks its row. The values of one observation under all goals then cost one pass
-    (:meth:`every_goal`), which is what an update on every goal needs.
+    picks its row. Either way :meth:`every_goal` gives the values of each observation
+    under every goal from one pass of the encoder, which an update on every goal needs.
 
     Args:
         num_actions: discrete actions.
@@ -145,12 +147,27 @@ class DuelingQNetwork(nn.Module):
         return self.value(hidden) + advantage - advantage.mean(dim=-1, keepdim=True)
 
     def every_goal(self, images: torch.Tensor, previous_actions: torch.Tensor) -> torch.Tensor:
-        """Q-values under every goal, shape (B, goal_size, num_actions); needs ``goal_heads``."""
-        if not self.goal_heads:
-            raise ValueError("every_goal needs a network built with goal_heads=True")
-        hidden = self.trunk(images, previous_actions)
-        advantage = self.advantage(hidden).unflatten(-1, (self.goal_size, self.num_actions))
-        return self.value(hidden)[..., None] + advantage - advantage.mean(dim=-1, keepdim=True)
+        """Q-values under every goal, shape (B, goal_size, num_actions), from one pass of the
+        encoder: with ``goal_heads`` from every head, else the dense layers run once per goal."""
+        if self.goal_heads:
+            hidden = self.trunk(images, previous_actions)
+            advantage = self.advantage(hidden).unflatten(-1, (self.goal_size, self.num_actions))
+            return self.value(hidden)[..., None] + advantage - advantage.mean(dim=-1, keepdim=True)
+        features = self.trunk.encode(images)
+        batch, size = len(features), self.goal_size
+        goals = torch.eye(size, dtype=features.dtype, device=features.device).expand(batch, size, size)
+        hidden = self.trunk.dense(
+            torch.cat(
+                [
+                    features[:, None].expand(-1, size, -1),
+                    goals,
+                    previous_actions.to(features.dtype)[:, None].expand(-1, size, -1),
+                ],
+                dim=-1,
+            )
+        )
+        advantage = self.advantage(hidden)
+        return self.value(hidden) + advantage - advantage.mean(dim=-1, keepdim=True)
 
 
 class PolicyNetwork(nn.Module):
