@@ -108,8 +108,9 @@ class DQNConfig:
         hidden: units of the dense layers after the encoder.
         layer_norm: LayerNorm in the Q-network's dense layers (as DroQ's critics).
         all_goals: every update teaches every goal (Kaelbling's all-goals update): each sampled
-            transition's target is computed for each goal from its pressed key (the achieved goal, an observation) and the reward rule;
-            the episode's end does not depend on the goal. ``False``: the sampled goal only.
+            transition's target is computed for each goal from its pressed key (the achieved
+            goal, an observation) and the reward rule; the episode's end does not depend on the
+            goal. ``False``: the sampled goal only.
         goal_heads: the goal picks one of the Q-network's heads (one per goal) instead of
             joining its dense layers as an input (the paper's).
     """
