@@ -572,6 +572,28 @@ def test_an_all_goals_update_is_the_single_goal_update_repeated_for_every_goal(t
     assert agent.update(data)["losses/q_loss"] == pytest.approx(float(expected), rel=1e-5)
 
 
+def test_relabel_weights_weigh_each_goals_error_as_the_relabelling_samples_it(tasks):
+    data = make_batch("dqn", tasks)
+    goals = data["goals"].shape[1]
+    data["achieved"] = np.array([-1, 0, 3, -1, 3, 5, -1, 1])
+    rng = np.random.default_rng(0)
+    data["goal_weights"] = rng.dirichlet(np.ones(goals), size=8).astype(np.float32)
+    losses = {}
+    for weights in ("uniform", "relabel"):
+        agent = build("dqn", tasks, all_goals=True, all_goals_weights=weights)
+        with torch.no_grad():
+            q, target = agent._all_goals_values(agent.tensors(data))
+        error = 0.5 * (q - target) ** 2
+        expected = (
+            error.mean()
+            if weights == "uniform"
+            else (error * torch.as_tensor(data["goal_weights"])).sum(-1).mean()
+        )
+        losses[weights] = agent.update(data)["losses/q_loss"]
+        assert losses[weights] == pytest.approx(float(expected), rel=1e-5)
+    assert losses["uniform"] != pytest.approx(losses["relabel"], rel=1e-3)
+
+
 def test_all_goals_is_refused_with_n_step_returns_or_goal_positions():
     from tactile_braille.agents.config import TrainConfig
 
@@ -579,6 +601,8 @@ def test_all_goals_is_refused_with_n_step_returns_or_goal_positions():
     assert TrainConfig(**base).agent.all_goals  # a tactile-track setting: the run is made
     with pytest.raises(ValueError, match=r"replay\.n_step=1"):
         TrainConfig(**base, replay={"n_step": 3})
+    with pytest.raises(ValueError, match=r"set agent\.all_goals"):
+        TrainConfig(**{**base, "agent": {"all_goals_weights": "relabel"}})
     touch = {"enabled": True, "goal_positions": True}
     for name in ("all_goals", "goal_heads"):
         with pytest.raises(ValueError, match=rf"agent\.{name} reads the goal as a one-hot alone"):

@@ -270,6 +270,25 @@ def test_all_rewards_follow_the_pressed_key_and_the_sampled_goal():
     assert abs(np.mean(goals == stored) - (0.2 + 0.4 * 12 / 15 + 0.4 / 4)) < 0.05
 
 
+def test_goal_weights_are_how_often_the_relabelling_samples_each_goal():
+    """The weights an all-goals update may use are the sampling's own frequencies, per transition."""
+    for buffer in (all_buffer(), all_buffer(relabel_final=0.7, relabel_random=0.1)):
+        fill(buffer, Frames())
+        batch = buffer.sample(40_000, np.random.default_rng(7))
+        weights, goals = batch["goal_weights"], goal_indices(batch["goals"])
+        np.testing.assert_allclose(weights.sum(-1), 1.0, rtol=1e-6)
+        for transition in np.unique(batch["actions"])[:6]:
+            rows = batch["actions"] == transition
+            counts = np.bincount(goals[rows], minlength=GOALS) / rows.sum()
+            np.testing.assert_allclose(counts, weights[rows][0], atol=0.06)
+    paper = EpisodeReplayBuffer(
+        100, GOALS, (), replay_helpers.PREVIOUS, max_episode_steps=10, relabel="paper"
+    )
+    fill(paper, Frames())
+    batch = paper.sample(50, np.random.default_rng(8))
+    np.testing.assert_array_equal(batch["goal_weights"], batch["goals"])  # goals are never redrawn
+
+
 def test_final_relabelling_gives_each_press_episode_its_pressed_key():
     buffer = all_buffer(relabel_final=1.0, relabel_random=0.0)
     table = fill(buffer, Frames())
@@ -821,8 +840,9 @@ def assert_same_batches(buffers, batch_size: int, seed: int) -> None:
     """Every buffer samples the same batch, bit for bit, and draws as much from its generator."""
     rngs = [np.random.default_rng(seed) for _ in buffers]
     batches = [buffer.sample(batch_size, rng) for buffer, rng in zip(buffers, rngs, strict=True)]
-    batches = [{name: value for name, value in batch.items() if name != "achieved"} for batch in batches]
-    first = batches[0]  # the buffer before the split had no "achieved" (the pressed key, for all-goals)
+    new = ("achieved", "goal_weights")  # what the buffer before the split lacked (for all-goals updates)
+    batches = [{name: value for name, value in batch.items() if name not in new} for batch in batches]
+    first = batches[0]
     for batch, rng in zip(batches[1:], rngs[1:], strict=True):
         assert list(batch) == list(first)
         for name in first:

@@ -41,6 +41,7 @@ TouchInputs = Literal["features", "readout"]
 TouchLabels = Literal["robot", "observation"]
 TargetUpdate = Literal["update", "epoch"]
 QLoss = Literal["mse", "huber"]
+GoalWeights = Literal["uniform", "relabel"]
 Track = Literal["tactile", "proprio"]
 
 PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
@@ -111,6 +112,9 @@ class DQNConfig:
             transition's target is computed for each goal from its pressed key (the achieved
             goal, an observation) and the reward rule; the episode's end does not depend on the
             goal. ``False``: the sampled goal only.
+        all_goals_weights: how an all-goals update weighs each transition's goals: ``"uniform"``
+            (each goal alike) or ``"relabel"`` (as likely as the replay's relabelling would
+            sample it: the update is the relabelling's expected one, every goal computed).
         goal_heads: the goal picks one of the Q-network's heads (one per goal) instead of
             joining its dense layers as an input (the paper's).
     """
@@ -130,6 +134,7 @@ class DQNConfig:
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
     all_goals: bool = False
+    all_goals_weights: GoalWeights = "uniform"
     goal_heads: bool = False
 
     def __post_init__(self) -> None:
@@ -450,6 +455,10 @@ class TrainConfig:
 
     def _check_all_goals(self) -> None:
         every = {name: getattr(self.agent, name, False) for name in ("all_goals", "goal_heads")}
+        if getattr(self.agent, "all_goals_weights", "uniform") != "uniform" and not every["all_goals"]:
+            raise ValueError(
+                "agent.all_goals_weights weighs the goals of an all-goals update: set agent.all_goals"
+            )
         if every["all_goals"] and self.replay.n_step > 1:
             raise ValueError(
                 f"agent.all_goals computes one-step targets for every goal: set replay.n_step=1, "

@@ -90,13 +90,23 @@ class DQNAgent(Agent):
         t = self.tensors(batch)
         with self.autocast():
             q, target = self._all_goals_values(t) if self.config.all_goals else self._values(t)
-            loss = F.smooth_l1_loss(q, target) if self.config.loss == "huber" else 0.5 * F.mse_loss(q, target)
+            loss = self._loss(q, target, t)
         self.optimiser.zero_grad(set_to_none=True)
         loss.backward()
         self.optimiser.step()
         if self.config.target_update == "update":
             soft_update(self.q, self.target, self.config.tau)
         return {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
+
+    def _loss(self, q: torch.Tensor, target: torch.Tensor, t: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The TD loss, averaged over the batch and its goals (alike, or as ``all_goals_weights``)."""
+        if self.config.loss == "huber":
+            error = F.smooth_l1_loss(q, target, reduction="none")
+        else:
+            error = 0.5 * (q - target) ** 2
+        if not self.config.all_goals or self.config.all_goals_weights == "uniform":
+            return error.mean()
+        return (error * t["goal_weights"]).sum(-1).mean()
 
     def _values(self, t: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """Q of the batch's actions under its goals, and their double-DQN targets, shape (B,)."""

@@ -265,6 +265,11 @@ class Relabelling:
         the later steps of n-step returns): the stored ones, where goals are never rewritten."""
         return stored
 
+    def goal_weights(self, goals: np.ndarray, finals: np.ndarray) -> np.ndarray:
+        """How likely :meth:`sampled` gives each transition each goal, (B, goal_size), from their
+        stored goals and their episodes' final keys: here the stored goal, certainly."""
+        return goals.astype(np.float32)
+
 
 class PaperRelabelling(Relabelling):
     """The paper's HER: a wrong-press episode is stored again with the pressed key as its goal."""
@@ -317,6 +322,16 @@ class SampledRelabelling(Relabelling):
         has_goal = goal >= 0
         relabelled[np.flatnonzero(has_goal), goal[has_goal]] = 1.0
         return relabelled, self.rewards(relabelled, rewards, achieved)
+
+    def goal_weights(self, goals: np.ndarray, finals: np.ndarray) -> np.ndarray:
+        batch, goal_size = goals.shape
+        weights = np.full((batch, goal_size), self.random / goal_size, dtype=np.float32)
+        weights += (1.0 - self.final - self.random) * goals  # kept
+        final = finals.astype(np.int64)
+        has_final = final >= 0
+        weights[np.flatnonzero(has_final), final[has_final]] += self.final
+        weights[~has_final] += self.final * goals[~has_final]  # no key to relabel to: kept
+        return weights
 
     def rewards(self, goals: np.ndarray, stored: np.ndarray, achieved: np.ndarray) -> np.ndarray:
         """1 where the pressed key is the goal."""
@@ -561,6 +576,7 @@ class EpisodeReplayBuffer:
             "next_previous_actions": self.previous_actions[last, 1],
             "dones": self.dones[last],
             "achieved": self.achieved[last].astype(np.int64),  # the pressed key's goal index, -1: none
+            "goal_weights": self.relabelling.goal_weights(self.goals[index], self.finals[index]),
         }
         if self.n_step > 1:
             batch["steps"] = steps
