@@ -7,11 +7,14 @@ each run through ``tactile_braille.cli.main`` as the shell runs it.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 import torch
 
 from tactile_braille.cli import main
+
+RECORD = str(Path(__file__).parents[1] / "results" / "tuning" / "DA_relabel-all_utd4_100")  # committed
 
 CASES = {
     "train --seed -1": (["train", "DiscreteArrows-v0", "--seed", "-1", "--run-dir", "{tmp}/run"],
@@ -26,6 +29,7 @@ CASES = {
     "classify into an existing folder": (["classify", "--output", "{tmp}"], "exists; choose another folder"),
     "classify into a file": (["classify", "--output", "{tmp}/file"], "(it is a file)"),
     "report --episodes -1": (["report", "{tmp}/run", "--episodes", "-1"], "must be a positive integer"),
+    "report a record without --output": (["report", RECORD], "is an archived record"),
     "rig check --keys ZZ": (["rig", "check", "--keys", "ZZ"], "--keys: unknown keys ['ZZ']"),
     "rig check, settings {}": (["rig", "check", "--config", "{tmp}/rig.json"],
                                "the UR5 rig settings lack ['host'"),
