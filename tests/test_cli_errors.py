@@ -29,7 +29,7 @@ CASES = {
     "classify into an existing folder": (["classify", "--output", "{tmp}"], "exists; choose another folder"),
     "classify into a file": (["classify", "--output", "{tmp}/file"], "(it is a file)"),
     "report --episodes -1": (["report", "{tmp}/run", "--episodes", "-1"], "must be a positive integer"),
-    "report a record without --output": (["report", RECORD], "is an archived record"),
+    "report a record without --output": (["report", RECORD], "table records with --output"),
     "rig check --keys ZZ": (["rig", "check", "--keys", "ZZ"], "--keys: unknown keys ['ZZ']"),
     "rig check, settings {}": (["rig", "check", "--config", "{tmp}/rig.json"],
                                "the UR5 rig settings lack ['host'"),

@@ -367,17 +367,15 @@ def _train_config(args: argparse.Namespace):
 def _report(args: argparse.Namespace) -> int:
     from tactile_braille.agents.report import write_report
 
-    records = [
-        run for run in args.runs if (run / "result.json").exists() and not (run / "checkpoint.pt").exists()
-    ]
+    records = [run for run in args.runs if not (run / "checkpoint.pt").exists()]
     if records and args.output is None:
         raise ValueError(
-            f"{records[0]} is an archived record (no checkpoint to evaluate again): "
-            "table records with --output FILE.md"
+            f"{records[0]} has no checkpoint to evaluate (an archived record, or a run before its first "
+            "epoch ended): table records with --output FILE.md"
         )
     for run in args.runs:
         if run in records:
-            continue  # an archived record: the report over runs reads it
+            continue  # an archived record (no checkpoint): the report over runs reads it
         report = write_report(run, episodes=args.episodes)
         print(report.read_text())
         print(f"wrote {report} and {report.parent / 'curve.png'}")
