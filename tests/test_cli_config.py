@@ -67,8 +67,10 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = "render", ["render"]
         if name == "frame_noise":
             value, words = (1.0, 2.0), ["1.0", "2.0"]
-        if name in ("replay.n_step", "touch.goal_positions"):  # given as their defaults: DQN's all-goals
-            value, words = _settings(algo)[name][1], None if name == "touch.goal_positions" else ["1"]
+        if name == "replay.n_step":  # given as its default: DQN's all-goals refuses n-step returns
+            value, words = 1, ["1"]
+        if name == "touch.goal_positions":  # given as its default: DQN's all-goals refuses goal positions
+            value, words = False, None
         flag = "--" + name.replace("_", "-")
         argv += [flag, *words] if words is not None else [flag if value else "--no-" + flag[2:]]
         wanted[name] = list(value) if isinstance(value, tuple) else value

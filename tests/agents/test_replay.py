@@ -249,7 +249,7 @@ def all_buffer(**kwargs) -> EpisodeReplayBuffer:
 
 
 def test_all_rewards_follow_the_pressed_key_and_the_sampled_goal():
-    buffer = all_buffer()
+    buffer = all_buffer(all_goals=True)
     table = fill(buffer, Frames())
     batch = buffer.sample(3000, np.random.default_rng(0))
     goals = goal_indices(batch["goals"])
@@ -257,6 +257,9 @@ def test_all_rewards_follow_the_pressed_key_and_the_sampled_goal():
     achieved = np.array([table[i]["achieved"] for i in ids])
     np.testing.assert_array_equal(batch["rewards"], (achieved == goals).astype(np.float32))
     np.testing.assert_array_equal(batch["achieved"], achieved)  # for updates on every goal
+    plain = all_buffer()
+    fill(plain, Frames())
+    assert not {"achieved", "goal_weights"} & set(plain.sample(8, np.random.default_rng(0)))  # asked for only
     terminal = np.array([table[i]["terminal"] for i in ids])
     np.testing.assert_array_equal(batch["dones"], terminal.astype(np.float32))
     assert (batch["rewards"][~terminal] == 0).all()
@@ -272,7 +275,10 @@ def test_all_rewards_follow_the_pressed_key_and_the_sampled_goal():
 
 def test_goal_weights_are_how_often_the_relabelling_samples_each_goal():
     """The weights an all-goals update may use are the sampling's own frequencies, per transition."""
-    for buffer in (all_buffer(), all_buffer(relabel_final=0.7, relabel_random=0.1)):
+    for buffer in (
+        all_buffer(all_goals=True),
+        all_buffer(relabel_final=0.7, relabel_random=0.1, all_goals=True),
+    ):
         fill(buffer, Frames())
         batch = buffer.sample(40_000, np.random.default_rng(7))
         weights, goals = batch["goal_weights"], goal_indices(batch["goals"])
@@ -282,7 +288,7 @@ def test_goal_weights_are_how_often_the_relabelling_samples_each_goal():
             counts = np.bincount(goals[rows], minlength=GOALS) / rows.sum()
             np.testing.assert_allclose(counts, weights[rows][0], atol=0.06)
     paper = EpisodeReplayBuffer(
-        100, GOALS, (), replay_helpers.PREVIOUS, max_episode_steps=10, relabel="paper"
+        100, GOALS, (), replay_helpers.PREVIOUS, max_episode_steps=10, relabel="paper", all_goals=True
     )
     fill(paper, Frames())
     batch = paper.sample(50, np.random.default_rng(8))
@@ -840,8 +846,6 @@ def assert_same_batches(buffers, batch_size: int, seed: int) -> None:
     """Every buffer samples the same batch, bit for bit, and draws as much from its generator."""
     rngs = [np.random.default_rng(seed) for _ in buffers]
     batches = [buffer.sample(batch_size, rng) for buffer, rng in zip(buffers, rngs, strict=True)]
-    new = ("achieved", "goal_weights")  # what the buffer before the split lacked (for all-goals updates)
-    batches = [{name: value for name, value in batch.items() if name not in new} for batch in batches]
     first = batches[0]
     for batch, rng in zip(batches[1:], rngs[1:], strict=True):
         assert list(batch) == list(first)

@@ -28,6 +28,7 @@ import torch
 
 from agents_helpers import (
     CONTINUOUS_TASK,
+    DISCRETE_TASK,
     HIDDEN,
     read_progress_csv,
     same_weights,
@@ -208,6 +209,27 @@ def test_sac_bf16_training_logs_finite_losses(env_datasets, tmp_path, recording)
     files = run_files(run)
     assert files["replay"] == ["replay.0.npz"] and len(files["events"]) >= 1
     assert json.loads((run / "config.json").read_text())["precision"] == "bf16"
+
+
+def test_an_all_goals_run_replays_the_pressed_keys_and_learns_every_goal(env_datasets, tmp_path, recording):
+    config = TrainConfig(
+        task=DISCRETE_TASK,
+        algo="dqn",
+        epochs=1,
+        steps_per_epoch=40,
+        start_steps=10,
+        threads=1,
+        dataset=str(env_datasets[DISCRETE_TASK]),
+        agent=DQNConfig(hidden=(64,), batch_size=8, all_goals=True, goal_heads=True),
+        evaluation={"test_episodes": 1},
+        replay={"capacity": 500, "relabel": "all"},
+    )
+    run = train(config, run_dir=tmp_path / "all-goals", progress=False)
+    (row,) = read_progress(run)
+    (buffer,) = recording
+    assert buffer.all_goals  # so its batches carry the pressed keys and the goals' weights
+    assert row["updates"] == buffer.samples > 0 and math.isfinite(row["losses/q_loss"])
+    assert json.loads((run / "config.json").read_text())["agent"]["all_goals"] is True
 
 
 def test_td3_progress_logs_the_actor_loss_whenever_the_actor_learned(env_datasets, tmp_path):

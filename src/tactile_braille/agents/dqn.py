@@ -122,6 +122,8 @@ class DQNAgent(Agent):
     def _all_goals_values(self, t: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """The same under every goal, shape (B, goals): the reward of goal g is 1 where the
         transition pressed key g (``achieved``, -1 for none), and the end does not depend on g."""
+        if "achieved" not in t:
+            raise ValueError("all_goals needs batches with 'achieved' (a replay made with all_goals=True)")
         with torch.no_grad():
             next_online = self.q.every_goal(t["next_images"], t["next_previous_actions"])
             next_action = next_online.argmax(dim=-1, keepdim=True)

@@ -100,6 +100,11 @@ def _small_head(inputs: int, outputs: int) -> nn.Linear:
     return head
 
 
+def _dueling(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
+    """``Q = V + A - mean(A)`` over the last (action) axis; ``value`` has a size-1 axis in its place."""
+    return value + advantage - advantage.mean(dim=-1, keepdim=True)
+
+
 class DuelingQNetwork(nn.Module):
     """Q-values of discrete actions with a dueling head: ``Q = V + A - mean(A)``.
 
@@ -143,8 +148,7 @@ class DuelingQNetwork(nn.Module):
             every = self.every_goal(images, previous_actions)
             return (every * goals.to(every.dtype)[..., None]).sum(dim=1)
         hidden = self.trunk(images, goals, previous_actions)
-        advantage = self.advantage(hidden)
-        return self.value(hidden) + advantage - advantage.mean(dim=-1, keepdim=True)
+        return _dueling(self.value(hidden), self.advantage(hidden))
 
     def every_goal(self, images: torch.Tensor, previous_actions: torch.Tensor) -> torch.Tensor:
         """Q-values under every goal, shape (B, goal_size, num_actions), from one pass of the
@@ -152,7 +156,7 @@ class DuelingQNetwork(nn.Module):
         if self.goal_heads:
             hidden = self.trunk(images, previous_actions)
             advantage = self.advantage(hidden).unflatten(-1, (self.goal_size, self.num_actions))
-            return self.value(hidden)[..., None] + advantage - advantage.mean(dim=-1, keepdim=True)
+            return _dueling(self.value(hidden)[..., None], advantage)
         features = self.trunk.encode(images)
         batch, size = len(features), self.goal_size
         goals = torch.eye(size, dtype=features.dtype, device=features.device).expand(batch, size, size)
@@ -166,8 +170,7 @@ class DuelingQNetwork(nn.Module):
                 dim=-1,
             )
         )
-        advantage = self.advantage(hidden)
-        return self.value(hidden) + advantage - advantage.mean(dim=-1, keepdim=True)
+        return _dueling(self.value(hidden), self.advantage(hidden))
 
 
 class PolicyNetwork(nn.Module):

@@ -373,6 +373,9 @@ class EpisodeReplayBuffer:
             by default), ``(n,)`` for feature vectors.
         poses: batches also carry the labelled sensor poses (x, y, depth in mm) of
             both frames, ``poses`` and ``next_poses``, for asymmetric critics.
+        all_goals: batches also carry each transition's pressed key (``achieved``, its goal
+            index, -1 for none) and how likely the relabelling gives it each goal
+            (``goal_weights``), for updates on every goal.
         n_step: steps of an episode a sampled transition's return spans (1: one-step
             transitions, the paper's); above 1 its rewards are discounted by ``gamma``.
         gamma: the agent's discount, needed where ``n_step`` > 1.
@@ -393,6 +396,7 @@ class EpisodeReplayBuffer:
         poses: bool = False,
         n_step: int = 1,
         gamma: float | None = None,
+        all_goals: bool = False,
     ) -> None:
         if n_step < 1:
             raise ValueError(f"n_step must be at least 1, got {n_step}")
@@ -411,7 +415,7 @@ class EpisodeReplayBuffer:
                 "probabilities that sum to at most 1"
             )
         self.capacity = int(capacity)
-        self.poses = bool(poses)
+        self.poses, self.all_goals = bool(poses), bool(all_goals)
         self.n_step, self.gamma = int(n_step), gamma
         self.her = her
         self.relabel = relabel
@@ -575,9 +579,10 @@ class EpisodeReplayBuffer:
             "next_images": observations(frames[:, 1]),
             "next_previous_actions": self.previous_actions[last, 1],
             "dones": self.dones[last],
-            "achieved": self.achieved[last].astype(np.int64),  # the pressed key's goal index, -1: none
-            "goal_weights": self.relabelling.goal_weights(self.goals[index], self.finals[index]),
         }
+        if self.all_goals:
+            batch["achieved"] = self.achieved[last].astype(np.int64)
+            batch["goal_weights"] = self.relabelling.goal_weights(self.goals[index], self.finals[index])
         if self.n_step > 1:
             batch["steps"] = steps
         if self.poses:

@@ -296,4 +296,5 @@ def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
         poses=getattr(config.agent, "critic_pose", False),
         n_step=config.replay.n_step,
         gamma=config.agent.gamma,
+        all_goals=getattr(config.agent, "all_goals", False),
     )
