@@ -67,9 +67,9 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = "render", ["render"]
         if name == "frame_noise":
             value, words = (1.0, 2.0), ["1.0", "2.0"]
-        if name == "replay.n_step":  # given as its default: DQN's all-goals refuses n-step returns
+        if name == "replay.n_step":  # given as its default: all-goals updates refuse n-step returns
             value, words = 1, ["1"]
-        if name == "touch.goal_positions":  # given as its default: DQN's all-goals refuses goal positions
+        if name == "touch.goal_positions":  # given as its default: all-goals updates refuse goal positions
             value, words = False, None
         flag = "--" + name.replace("_", "-")
         argv += [flag, *words] if words is not None else [flag if value else "--no-" + flag[2:]]

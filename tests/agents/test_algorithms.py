@@ -532,21 +532,33 @@ def test_a_batch_of_n_step_returns_discounts_its_bootstrap_by_gamma_to_the_steps
 
 # ---------------------------------------------------------------- every goal at once
 @pytest.mark.parametrize("goal_heads", [False, True])
-def test_every_goals_values_hold_each_goals_own(tasks, goal_heads):
-    agent = build("dqn", tasks, goal_heads=goal_heads)
-    images, goals, previous = state_inputs(agent, make_batch("dqn", tasks))
+@pytest.mark.parametrize("algo", ["dqn", "sac_discrete"])
+def test_every_goals_values_hold_each_goals_own(tasks, algo, goal_heads):
+    """DQN's Q-network and discrete SAC's policy give every goal's outputs at once, each the
+    output under that goal alone."""
+    agent = build(algo, tasks, goal_heads=goal_heads)
+    network = agent.q if algo == "dqn" else agent.actor
+
+    def first(output):  # the policy's probabilities (beside their logs), or the Q-values
+        return output[0] if isinstance(output, tuple) else output
+
+    images, goals, previous = state_inputs(agent, make_batch(algo, tasks))
     with torch.no_grad():
-        every = agent.q.every_goal(images, previous)
-        chosen = agent.q(images, goals, previous)
+        every = first(network.every_goal(images, previous))
         assert every.shape == (len(goals), goals.shape[1], agent.num_actions)
-        assert torch.allclose(chosen, every[torch.arange(len(goals)), goals.argmax(-1)], atol=1e-6)
-        other = torch.roll(goals, 1, dims=-1)
-        assert torch.allclose(
-            agent.q(images, other, previous), every[torch.arange(len(goals)), other.argmax(-1)]
-        )
-    assert agent.q.trunk.dense[0].in_features == 5184 + previous.shape[1] + (
+        for some in (goals, torch.roll(goals, 1, dims=-1)):
+            rows = every[torch.arange(len(goals)), some.argmax(-1)]
+            assert torch.allclose(first(network(images, some, previous)), rows, atol=1e-6)
+    assert network.trunk.dense[0].in_features == 5184 + previous.shape[1] + (
         0 if goal_heads else goals.shape[1]
     )
+
+
+def relabelled_to(data: dict[str, np.ndarray], goal: int) -> dict[str, np.ndarray]:
+    """A batch with every transition's goal set to ``goal``, rewarded where it pressed that key."""
+    size, goals = data["goals"].shape
+    one_hot = np.tile(np.eye(goals, dtype=np.float32)[goal], (size, 1))
+    return {**data, "goals": one_hot, "rewards": (data["achieved"] == goal).astype(np.float32)}
 
 
 @pytest.mark.parametrize("goal_heads", [False, True])
@@ -562,14 +574,47 @@ def test_an_all_goals_update_is_the_single_goal_update_repeated_for_every_goal(t
     with torch.no_grad():
         q_every, target_every = agent._all_goals_values(t)
         for g in range(goals):
-            relabelled = {**data, "goals": np.tile(np.eye(goals, dtype=np.float32)[g], (8, 1)),
-                          "rewards": (data["achieved"] == g).astype(np.float32)}  # fmt: skip
-            q, target = agent._values(agent.tensors(relabelled))
+            q, target = agent._values(agent.tensors(relabelled_to(data, g)))
             assert torch.allclose(q_every[:, g], q, atol=1e-6)
             assert torch.allclose(target_every[:, g], target, atol=1e-6)
     assert target_every[1, 0] > target_every[1, 1]  # the press of key 0 pays goal 0 only
     expected = 0.5 * ((q_every - target_every) ** 2).mean()
     assert agent.update(data)["losses/q_loss"] == pytest.approx(float(expected), rel=1e-5)
+
+
+@pytest.mark.parametrize("goal_heads", [False, True])
+def test_a_discrete_sac_all_goals_update_is_the_mean_of_its_single_goal_updates(tasks, goal_heads):
+    """Discrete SAC under every goal: each goal's critic targets are those of the batch relabelled
+    to it, and the critics', the actor's and the temperature's losses are the mean over goals of
+    the single-goal updates' losses (each on a fresh copy of the same agent)."""
+    data = make_batch("sac_discrete", tasks)
+    goals = data["goals"].shape[1]
+    data["achieved"] = np.array([-1, 0, 3, -1, 3, 5, -1, 1])
+    other = build("sac_discrete", tasks, seed=1, goal_heads=goal_heads).critics.state_dict()
+
+    def agent(**options):
+        made = build("sac_discrete", tasks, goal_heads=goal_heads, **options)
+        made.targets.load_state_dict(other)  # targets unlike the critics, so that they count
+        return made
+
+    every = agent(all_goals=True)
+    alpha = every.log_alpha.exp().detach()
+    with torch.no_grad():
+        q_every, target_every = every._every_goal_values(every.tensors(data), alpha)
+        for g in range(goals):
+            q, target = every._values(every.tensors(relabelled_to(data, g)), alpha)
+            assert all(torch.allclose(a[:, g], b, atol=1e-6) for a, b in zip(q_every, q, strict=True))
+            assert torch.allclose(target_every[:, g], target, atol=1e-6)
+    assert target_every[1, 0] > target_every[1, 1]  # the press of key 0 pays goal 0 only
+    single = [agent().update(relabelled_to(data, g)) for g in range(goals)]
+    losses = every.update(data)
+    assert losses == pytest.approx({name: np.mean([s[name] for s in single]) for name in losses}, rel=1e-5)
+
+
+def test_an_all_goals_update_needs_the_pressed_keys(tasks):
+    for algo in ("dqn", "sac_discrete"):
+        with pytest.raises(ValueError, match=r"'achieved'.*all_goals=True"):
+            build(algo, tasks, all_goals=True).update(make_batch(algo, tasks))
 
 
 def test_relabel_weights_weigh_each_goals_error_as_the_relabelling_samples_it(tasks):
@@ -594,15 +639,17 @@ def test_relabel_weights_weigh_each_goals_error_as_the_relabelling_samples_it(ta
     assert losses["uniform"] != pytest.approx(losses["relabel"], rel=1e-3)
 
 
-def test_all_goals_is_refused_with_n_step_returns_or_goal_positions():
+@pytest.mark.parametrize("algo", ["dqn", "sac_discrete"])
+def test_all_goals_is_refused_with_n_step_returns_or_goal_positions(algo):
     from tactile_braille.agents.config import TrainConfig
 
-    base = {"task": "tactile_braille/DiscreteAlphabet-v0", "algo": "dqn", "agent": {"all_goals": True}}
+    base = {"task": "tactile_braille/DiscreteAlphabet-v0", "algo": algo, "agent": {"all_goals": True}}
     assert TrainConfig(**base).agent.all_goals  # a tactile-track setting: the run is made
     with pytest.raises(ValueError, match=r"replay\.n_step=1"):
         TrainConfig(**base, replay={"n_step": 3})
-    with pytest.raises(ValueError, match=r"set agent\.all_goals"):
-        TrainConfig(**{**base, "agent": {"all_goals_weights": "relabel"}})
+    if algo == "dqn":  # discrete SAC weighs every goal alike
+        with pytest.raises(ValueError, match=r"set agent\.all_goals"):
+            TrainConfig(**{**base, "agent": {"all_goals_weights": "relabel"}})
     touch = {"enabled": True, "goal_positions": True}
     for name in ("all_goals", "goal_heads"):
         with pytest.raises(ValueError, match=rf"agent\.{name} reads the goal as a one-hot alone"):

@@ -38,6 +38,7 @@ from agents_helpers import (
 from feature_agents import ACTIONS, GOALS, PREVIOUS
 from replay_helpers import as_images
 from tactile_braille.agents import (
+    DiscreteSACConfig,
     DQNAgent,
     DQNConfig,
     EpisodeReplayBuffer,
@@ -211,16 +212,20 @@ def test_sac_bf16_training_logs_finite_losses(env_datasets, tmp_path, recording)
     assert json.loads((run / "config.json").read_text())["precision"] == "bf16"
 
 
-def test_an_all_goals_run_replays_the_pressed_keys_and_learns_every_goal(env_datasets, tmp_path, recording):
+@pytest.mark.parametrize("algo", ["dqn", "sac_discrete"])
+def test_an_all_goals_run_replays_the_pressed_keys_and_learns_every_goal(
+    env_datasets, tmp_path, recording, algo
+):
+    agent_config = DQNConfig if algo == "dqn" else DiscreteSACConfig
     config = TrainConfig(
         task=DISCRETE_TASK,
-        algo="dqn",
+        algo=algo,
         epochs=1,
         steps_per_epoch=40,
         start_steps=10,
         threads=1,
         dataset=str(env_datasets[DISCRETE_TASK]),
-        agent=DQNConfig(hidden=(64,), batch_size=8, all_goals=True, goal_heads=True),
+        agent=agent_config(hidden=(64,), batch_size=8, all_goals=True, goal_heads=True),
         evaluation={"test_episodes": 1},
         replay={"capacity": 500, "relabel": "all"},
     )
@@ -228,7 +233,8 @@ def test_an_all_goals_run_replays_the_pressed_keys_and_learns_every_goal(env_dat
     (row,) = read_progress(run)
     (buffer,) = recording
     assert buffer.all_goals  # so its batches carry the pressed keys and the goals' weights
-    assert row["updates"] == buffer.samples > 0 and math.isfinite(row["losses/q_loss"])
+    loss = "losses/q_loss" if algo == "dqn" else "losses/qf_loss"
+    assert row["updates"] == buffer.samples > 0 and math.isfinite(row[loss])
     assert json.loads((run / "config.json").read_text())["agent"]["all_goals"] is True
 
 

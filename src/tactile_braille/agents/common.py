@@ -57,6 +57,21 @@ def critic_poses(batch: dict[str, torch.Tensor], wanted: bool) -> tuple[tuple, t
     return (batch["poses"],), (batch["next_poses"],)
 
 
+def every_goal_rewards(batch: dict[str, torch.Tensor], goal_size: int) -> torch.Tensor:
+    """Each transition's reward under every goal, shape (B, goal_size), for an all-goals update:
+    1 where it pressed key g (``achieved``, its achieved goal; -1 for no press), else 0."""
+    if "achieved" not in batch:
+        raise ValueError("all_goals needs batches with 'achieved' (a replay made with all_goals=True)")
+    achieved = batch["achieved"]
+    return (achieved[:, None] == torch.arange(goal_size, device=achieved.device)).float()
+
+
+def chosen(values: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """The values of the batch's actions: ``values`` (B, ..., actions) and ``actions`` (B,) give (B, ...)."""
+    index = actions.reshape(-1, *[1] * (values.dim() - 1)).expand(*values.shape[:-1], 1)
+    return values.gather(-1, index).squeeze(-1)
+
+
 class Agent:
     """Base of the agents: device, precision, checkpointing of named parts.
 

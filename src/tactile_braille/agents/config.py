@@ -203,6 +203,11 @@ class DiscreteSACConfig:
         layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
         shared_encoder: the actor reuses the first critic's encoder, detached
             (not the paper's setting; as in SAC-AE and DrQ).
+        all_goals: every update teaches every goal, as DQN's: the critics' targets, the actor's
+            loss and the temperature's entropy are computed under each goal for each sampled
+            transition. ``False``: the sampled goal only.
+        goal_heads: the goal picks one of the critics' and the actor's heads (one per goal)
+            instead of joining their dense layers as an input (the paper's).
     """
 
     gamma: float = 0.6
@@ -216,6 +221,8 @@ class DiscreteSACConfig:
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
     shared_encoder: bool = False
+    all_goals: bool = False
+    goal_heads: bool = False
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)

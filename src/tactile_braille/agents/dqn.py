@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, network_options, spaces_sizes
+from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
 from tactile_braille.agents.config import DQNConfig
 from tactile_braille.agents.networks import DuelingQNetwork, observation_tensors, soft_update
 from tactile_braille.supervised.fit import adam
@@ -117,24 +117,20 @@ class DQNAgent(Agent):
             next_value = next_target.gather(-1, next_action).squeeze(-1).float()
             target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
         q_all = self.q(t["images"], t["goals"], t["previous_actions"])
-        return q_all.gather(-1, t["actions"][:, None]).squeeze(-1).float(), target
+        return chosen(q_all, t["actions"]).float(), target
 
     def _all_goals_values(self, t: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """The same under every goal, shape (B, goals): the reward of goal g is 1 where the
         transition pressed key g (``achieved``, -1 for none), and the end does not depend on g."""
-        if "achieved" not in t:
-            raise ValueError("all_goals needs batches with 'achieved' (a replay made with all_goals=True)")
+        rewards = every_goal_rewards(t, self.q.goal_size)
         with torch.no_grad():
             next_online = self.q.every_goal(t["next_images"], t["next_previous_actions"])
             next_action = next_online.argmax(dim=-1, keepdim=True)
             next_target = self.target.every_goal(t["next_images"], t["next_previous_actions"])
             next_value = next_target.gather(-1, next_action).squeeze(-1).float()
-            goals = torch.arange(self.q.goal_size, device=self.device)
-            rewards = (t["achieved"][:, None] == goals).float()
             target = rewards + (self.discount(t) * (1.0 - t["dones"]))[..., None] * next_value
         q_all = self.q.every_goal(t["images"], t["previous_actions"])
-        actions = t["actions"][:, None, None].expand(-1, self.q.goal_size, 1)
-        return q_all.gather(-1, actions).squeeze(-1).float(), target
+        return chosen(q_all, t["actions"]).float(), target
 
     def end_epoch(self) -> None:
         """The released code's target update: once per epoch, ``tau`` of the way to the online net."""

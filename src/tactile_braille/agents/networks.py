@@ -91,6 +91,17 @@ class GoalConditionedTrunk(nn.Module):
     def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:
         return self.dense(torch.cat([self.encode(images), *vectors], dim=-1))
 
+    def every_goal(
+        self, images: torch.Tensor, previous_actions: torch.Tensor, goal_size: int
+    ) -> torch.Tensor:
+        """The dense layers' output under every goal one-hot, shape (B, goal_size, features), from one
+        pass of the encoder (for a trunk whose vectors are the goal, then the previous action)."""
+        features = self.encode(images)
+        batch = len(features)
+        goals = torch.eye(goal_size, dtype=features.dtype, device=features.device).expand(batch, -1, -1)
+        previous = previous_actions.to(features.dtype)[:, None].expand(-1, goal_size, -1)
+        return self.dense(torch.cat([features[:, None].expand(-1, goal_size, -1), goals, previous], dim=-1))
+
 
 def _small_head(inputs: int, outputs: int) -> nn.Linear:
     """A linear output layer initialised near zero (Q near 0, policy near uniform)."""
@@ -103,6 +114,11 @@ def _small_head(inputs: int, outputs: int) -> nn.Linear:
 def _dueling(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
     """``Q = V + A - mean(A)`` over the last (action) axis; ``value`` has a size-1 axis in its place."""
     return value + advantage - advantage.mean(dim=-1, keepdim=True)
+
+
+def _goal_row(every: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
+    """Each observation's row of ``every`` (B, goal_size, ...) for its goal one-hot (B, goal_size)."""
+    return (every * goals.to(every.dtype).reshape(*goals.shape, *[1] * (every.dim() - 2))).sum(dim=1)
 
 
 class DuelingQNetwork(nn.Module):
@@ -145,8 +161,7 @@ class DuelingQNetwork(nn.Module):
         self, images: torch.Tensor, goals: torch.Tensor, previous_actions: torch.Tensor
     ) -> torch.Tensor:
         if self.goal_heads:
-            every = self.every_goal(images, previous_actions)
-            return (every * goals.to(every.dtype)[..., None]).sum(dim=1)
+            return _goal_row(self.every_goal(images, previous_actions), goals)
         hidden = self.trunk(images, goals, previous_actions)
         return _dueling(self.value(hidden), self.advantage(hidden))
 
@@ -157,24 +172,16 @@ class DuelingQNetwork(nn.Module):
             hidden = self.trunk(images, previous_actions)
             advantage = self.advantage(hidden).unflatten(-1, (self.goal_size, self.num_actions))
             return _dueling(self.value(hidden)[..., None], advantage)
-        features = self.trunk.encode(images)
-        batch, size = len(features), self.goal_size
-        goals = torch.eye(size, dtype=features.dtype, device=features.device).expand(batch, size, size)
-        hidden = self.trunk.dense(
-            torch.cat(
-                [
-                    features[:, None].expand(-1, size, -1),
-                    goals,
-                    previous_actions.to(features.dtype)[:, None].expand(-1, size, -1),
-                ],
-                dim=-1,
-            )
-        )
+        hidden = self.trunk.every_goal(images, previous_actions, self.goal_size)
         return _dueling(self.value(hidden), self.advantage(hidden))
 
 
 class PolicyNetwork(nn.Module):
-    """Categorical policy over discrete actions (same trunk, a logits head)."""
+    """Categorical policy over discrete actions (same trunk, a logits head).
+
+    ``goal_heads`` and :meth:`every_goal` as :class:`DuelingQNetwork`'s: a logits head per goal
+    instead of the goal as an input, and every goal's probabilities from one pass of the encoder.
+    """
 
     def __init__(
         self,
@@ -183,16 +190,33 @@ class PolicyNetwork(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        goal_heads: bool = False,
         **options,
     ) -> None:
         super().__init__()
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
-        self.logits = _small_head(self.trunk.features, num_actions)
+        self.goal_heads, self.goal_size, self.num_actions = goal_heads, goal_size, num_actions
+        vector_size = previous_action_size if goal_heads else goal_size + previous_action_size
+        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
+        self.logits = _small_head(self.trunk.features, (goal_size if goal_heads else 1) * num_actions)
 
     def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor]:
         """Action probabilities and their logs."""
-        logits = self.logits(self.trunk(images, goals, previous_actions)).float()
+        if self.goal_heads:
+            logits = _goal_row(self._every_logits(images, previous_actions), goals)
+        else:
+            logits = self.logits(self.trunk(images, goals, previous_actions)).float()
         return F.softmax(logits, dim=-1), F.log_softmax(logits, dim=-1)
+
+    def every_goal(self, images, previous_actions) -> tuple[torch.Tensor, torch.Tensor]:
+        """Probabilities and their logs under every goal, shape (B, goal_size, num_actions)."""
+        logits = self._every_logits(images, previous_actions)
+        return F.softmax(logits, dim=-1), F.log_softmax(logits, dim=-1)
+
+    def _every_logits(self, images, previous_actions) -> torch.Tensor:
+        if self.goal_heads:
+            hidden = self.trunk(images, previous_actions)
+            return self.logits(hidden).float().unflatten(-1, (self.goal_size, self.num_actions))
+        return self.logits(self.trunk.every_goal(images, previous_actions, self.goal_size)).float()
 
 
 class ContinuousQNetwork(nn.Module):

@@ -3,7 +3,10 @@
 Reads top to bottom: hyperparameters, a categorical policy over the paper's
 encoder, twin critics with Polyak-averaged targets, and the three updates
 (critics, actor, temperature). Expectations over actions are exact sums over
-the categorical distribution, so no reparameterisation is needed.
+the categorical distribution, so no reparameterisation is needed. With
+``all_goals`` each of the three is computed under every goal at once (values
+of shape (batch, goals, actions) where the single-goal update has (batch,
+actions)), as DQN's all-goals update.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from tactile_braille.agents.common import Agent, network_options, spaces_sizes
+from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
 from tactile_braille.agents.config import DiscreteSACConfig
 from tactile_braille.agents.networks import DuelingQNetwork, PolicyNetwork, observation_tensors, soft_update
 from tactile_braille.supervised.fit import adam
@@ -54,6 +57,7 @@ class DiscreteSACAgent(Agent):
         self.num_actions = int(action_space.n)
         sizes = (self.num_actions, *spaces_sizes(observation_space), config.hidden)
         actor_options, critic_options = network_options(observation_space, config)
+        actor_options["goal_heads"] = critic_options["goal_heads"] = config.goal_heads
         self.critics = nn.ModuleList([DuelingQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
             self.device
         )
@@ -89,23 +93,19 @@ class DiscreteSACAgent(Agent):
         """One update of the critics, the actor and the temperature."""
         t = self.tensors(batch)
         alpha = self.log_alpha.exp().detach()
-        state = (t["images"], t["goals"], t["previous_actions"])
-        next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+        values = self._every_goal_values if self.config.all_goals else self._values
         with self.autocast():
-            with torch.no_grad():
-                next_probs, next_log_probs = self.actor(*next_state)
-                next_q = torch.min(*(target(*next_state) for target in self.targets)).float()
-                next_value = (next_probs * (next_q - alpha * next_log_probs)).sum(-1)
-                target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
-            q_values = [critic(*state).float() for critic in self.critics]
-            taken = t["actions"][:, None]
-            critic_loss = sum(F.mse_loss(q.gather(-1, taken).squeeze(-1), target) for q in q_values)
+            q_values, target = values(t, alpha)
+            critic_loss = sum(F.mse_loss(chosen(q, t["actions"]), target) for q in q_values)
         self.critic_optimiser.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_optimiser.step()
 
         with self.autocast():
-            probs, log_probs = self.actor(*state)
+            if self.config.all_goals:
+                probs, log_probs = self.actor.every_goal(t["images"], t["previous_actions"])
+            else:
+                probs, log_probs = self.actor(t["images"], t["goals"], t["previous_actions"])
             q_min = torch.min(q_values[0], q_values[1]).detach()
             actor_loss = (probs * (alpha * log_probs - q_min)).sum(-1).mean()
         self.actor_optimiser.zero_grad(set_to_none=True)
@@ -125,3 +125,34 @@ class DiscreteSACAgent(Agent):
             "losses/alpha": alpha.item(),
             "losses/entropy": entropy.mean().item(),
         }
+
+    def _values(self, t: dict[str, torch.Tensor], alpha: torch.Tensor) -> tuple[list, torch.Tensor]:
+        """Both critics' values of every action under the batch's goals (B, actions), and the soft
+        targets of the batch's actions (B,)."""
+        next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+        with torch.no_grad():
+            next_probs, next_log_probs = self.actor(*next_state)
+            next_q = torch.min(*(target(*next_state) for target in self.targets)).float()
+            target = self._target(t, next_probs, next_log_probs, next_q, t["rewards"], alpha)
+        q_values = [critic(t["images"], t["goals"], t["previous_actions"]).float() for critic in self.critics]
+        return q_values, target
+
+    def _every_goal_values(
+        self, t: dict[str, torch.Tensor], alpha: torch.Tensor
+    ) -> tuple[list, torch.Tensor]:
+        """The same under every goal: values (B, goals, actions) and targets (B, goals); the reward
+        of goal g is 1 where the transition pressed key g, and the end does not depend on g."""
+        rewards = every_goal_rewards(t, self.critics[0].goal_size)
+        next_state = (t["next_images"], t["next_previous_actions"])
+        with torch.no_grad():
+            next_probs, next_log_probs = self.actor.every_goal(*next_state)
+            next_q = torch.min(*(target.every_goal(*next_state) for target in self.targets)).float()
+            target = self._target(t, next_probs, next_log_probs, next_q, rewards, alpha)
+        q_values = [critic.every_goal(t["images"], t["previous_actions"]).float() for critic in self.critics]
+        return q_values, target
+
+    def _target(self, t, next_probs, next_log_probs, next_q, rewards, alpha) -> torch.Tensor:
+        """``r + discount (1 - done) V(s')``, with the soft value ``V`` summed exactly over actions."""
+        next_value = (next_probs * (next_q - alpha * next_log_probs)).sum(-1)
+        continues = self.discount(t) * (1.0 - t["dones"])
+        return rewards + (continues if next_value.dim() == 1 else continues[..., None]) * next_value
