@@ -100,13 +100,14 @@ class RecordingBuffer(EpisodeReplayBuffer):
 
 
 def expected_updates(sizes: list[int], steps_before: int, config: TrainConfig) -> int:
-    """The burst rule: at env step k (counted from 1), if k >= start_steps, k % update_every == 0
-    and the buffer holds a batch, do update_every * updates_per_step updates."""
+    """The burst rule: at env step k (counted from 1), if k >= start_steps (or update_after, where
+    set), k % update_every == 0 and the buffer holds a batch, do update_every * updates_per_step updates."""
     burst = config.update_every * config.updates_per_step
+    first = config.start_steps if config.update_after is None else config.update_after
     return sum(
         burst
         for step, size in enumerate(sizes, start=steps_before + 1)
-        if step >= config.start_steps and step % config.update_every == 0 and size >= config.agent.batch_size
+        if step >= first and step % config.update_every == 0 and size >= config.agent.batch_size
     )
 
 
@@ -236,6 +237,34 @@ def test_an_all_goals_run_replays_the_pressed_keys_and_learns_every_goal(
     loss = "losses/q_loss" if algo == "dqn" else "losses/qf_loss"
     assert row["updates"] == buffer.samples > 0 and math.isfinite(row[loss])
     assert json.loads((run / "config.json").read_text())["agent"]["all_goals"] is True
+
+
+def test_updates_start_after_update_after_steps_where_set_as_the_released_code(
+    env_datasets, tmp_path, recording
+):
+    """The paper's runs update after their random start steps; the released code from its first step
+    (``update_after=1``: from the step its replay holds a batch), while the start steps still act at
+    random."""
+    runs = {}
+    for update_after in (None, 1):
+        config = TrainConfig(
+            task=DISCRETE_TASK,
+            epochs=1,
+            steps_per_epoch=40,
+            start_steps=30,
+            update_after=update_after,
+            threads=1,
+            dataset=str(env_datasets[DISCRETE_TASK]),
+            agent=DQNConfig(hidden=(16,), batch_size=8),
+            evaluation={"test_episodes": 1},
+        )
+        run = train(config, run_dir=tmp_path / f"after-{update_after}", progress=False)
+        buffer = recording[-1]
+        (row,) = read_progress(run)
+        assert row["updates"] == buffer.samples == expected_updates(buffer.sizes, 0, config)
+        runs[update_after] = row["updates"]
+    assert runs[None] == 2 * (40 - 30 + 1)  # steps 30-40, two updates each
+    assert runs[1] - runs[None] >= 2 * 20  # and in most start steps too, once the replay held a batch
 
 
 def test_td3_progress_logs_the_actor_loss_whenever_the_actor_learned(env_datasets, tmp_path):

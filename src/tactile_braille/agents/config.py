@@ -385,6 +385,9 @@ class TrainConfig:
         updates_per_step: gradient updates per environment step (None: 2, TD3 1).
         update_every: updates happen in bursts every this many steps
             (``update_every * updates_per_step`` at a time; the released TD3 used 100).
+        update_after: updates start after this many environment steps, once the replay holds a
+            batch (None: after ``start_steps``, the paper's; the released DQN and SACs updated from
+            their first step, as ``1``: from the step the replay first holds a batch).
         max_episode_steps: episode cut (None: the registry's 25).
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
         frame_noise: ``(mm, degrees)``: the render backend's work frame off by an error drawn anew each
@@ -418,6 +421,7 @@ class TrainConfig:
     start_steps: int = 200
     updates_per_step: int | None = None
     update_every: int = 1
+    update_after: int | None = None
     max_episode_steps: int | None = None
     backend: Backend = "dataset"
     frame_noise: tuple[float, ...] | None = None
@@ -453,7 +457,7 @@ class TrainConfig:
         self._check_frame_noise()
         _at_least(self, 1, "epochs", "steps_per_epoch", "update_every", "checkpoint_every", "threads",
                   "max_episode_steps")  # fmt: skip
-        _at_least(self, 0, "seed", "start_steps", "updates_per_step")
+        _at_least(self, 0, "seed", "start_steps", "updates_per_step", "update_after")
         self._check_task()
         self._check_device()
         self._check_touch()

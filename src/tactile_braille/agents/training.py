@@ -177,12 +177,11 @@ def check_dataset(config: TrainConfig) -> None:
 
 
 def updates_due(config: TrainConfig, env_steps: int, buffer: EpisodeReplayBuffer) -> bool:
-    """Whether a burst of updates follows this step: after the start steps, every ``update_every``
-    steps, once the replay holds a batch."""
+    """Whether a burst of updates follows this step: after the start steps (or ``update_after``),
+    every ``update_every`` steps, once the replay holds a batch."""
+    first = config.start_steps if config.update_after is None else config.update_after
     return (
-        env_steps >= config.start_steps
-        and env_steps % config.update_every == 0
-        and buffer.size >= config.agent.batch_size
+        env_steps >= first and env_steps % config.update_every == 0 and buffer.size >= config.agent.batch_size
     )
 
 
