@@ -243,8 +243,7 @@ def test_updates_start_after_update_after_steps_where_set_as_the_released_code(
     env_datasets, tmp_path, recording
 ):
     """The paper's runs update after their random start steps; the released code from its first step
-    (``update_after=1``: from the step its replay holds a batch), while the start steps still act at
-    random."""
+    (``update_after=1``: from the step its replay holds a batch)."""
     runs = {}
     for update_after in (None, 1):
         config = TrainConfig(
