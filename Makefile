@@ -56,11 +56,12 @@ bench: $(STAMP)
 # and `tactile-braille archive` write them). Runs on any machine, no training needed.
 # docs/leaderboard.md ranks those records and the results files of other libraries' agents
 # (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md).
-# results/tuning/ holds the runs settings were chosen on (their seeds are not reported): left out here.
+# results/tuning/ holds the runs settings were chosen on (their seeds are not reported), and
+# results/diagnostics/ runs that test a cause (some stopped early): both left out here.
 # results/transfer/ holds runs typed in other worlds (evaluate --world): their own section.
 # results/warm-start/ holds warm starts (train --init-from) and their sources: their own section too.
 ALL_RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json))))
-RECORDS = $(filter-out results/tuning/% results/transfer/% results/warm-start/%,$(ALL_RECORDS))
+RECORDS = $(filter-out results/tuning/% results/diagnostics/% results/transfer/% results/warm-start/%,$(ALL_RECORDS))
 TRANSFER = $(filter results/transfer/%,$(ALL_RECORDS))
 WARM = $(filter results/warm-start/%,$(ALL_RECORDS))
 # results/ablation-*/ hold ablations (a preset with one part taken away): tabled, not ranked.
