@@ -554,6 +554,15 @@ def test_every_goals_values_hold_each_goals_own(tasks, algo, goal_heads):
     )
 
 
+def test_dqn_builds_the_released_codes_dueling_network_where_asked(tasks):
+    agent = build("dqn", tasks, dueling_split=True, weights_init="released")
+    assert agent.q.split == agent.target.split == HIDDEN[-1] // 2
+    assert torch.all(agent.q.value.bias == 0) and agent.q.value.weight.std() > 0.1  # not near zero
+    assert build("dqn", tasks).q.split == 0
+    losses = agent.update(make_batch("dqn", tasks))
+    assert np.isfinite(losses["losses/q_loss"])
+
+
 def relabelled_to(data: dict[str, np.ndarray], goal: int) -> dict[str, np.ndarray]:
     """A batch with every transition's goal set to ``goal``, rewarded where it pressed that key."""
     size, goals = data["goals"].shape

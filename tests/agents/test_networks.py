@@ -1,4 +1,5 @@
-"""The networks (agents/networks.py): the squashed Gaussian policy's log-probabilities, critics with poses."""
+"""The networks (agents/networks.py): the squashed Gaussian policy's log-probabilities, critics with poses,
+the released code's dueling split and initial weights."""
 
 from __future__ import annotations
 
@@ -10,7 +11,14 @@ from torch.distributions import Normal, TanhTransform, TransformedDistribution
 
 from feature_agents import ACTIONS, FEATURES, GOALS, PREVIOUS
 from tactile_braille.agents.common import POSE_SIZE
-from tactile_braille.agents.networks import LOG_STD_MAX, LOG_STD_MIN, ContinuousQNetwork, GaussianPolicy
+from tactile_braille.agents.networks import (
+    LOG_STD_MAX,
+    LOG_STD_MIN,
+    TRUNCATED_NORMAL_STD,
+    ContinuousQNetwork,
+    DuelingQNetwork,
+    GaussianPolicy,
+)
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -72,3 +80,42 @@ def test_an_asymmetric_critic_takes_poses_and_a_plain_one_refuses_them():
         plain(*inputs, poses)
     with pytest.raises(ValueError, match="pose_size must be at least 0"):
         ContinuousQNetwork(*sizes, pose_size=-1, features=FEATURES)
+
+
+@pytest.mark.parametrize("goal_heads", [False, True])
+def test_a_split_dueling_head_reads_half_the_units_each(goal_heads):
+    """The released code's dueling network: the value head on the first half of the last dense
+    layer's units, the advantage head on the second half."""
+    torch.manual_seed(0)
+    net = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, hidden=(64,), features=FEATURES, goal_heads=goal_heads,
+                          dueling_split=True)  # fmt: skip
+    assert (net.value.in_features, net.advantage.in_features) == (32, 32)
+    features, previous = torch.randn(5, FEATURES), torch.randn(5, PREVIOUS)
+    goals = torch.eye(GOALS)[torch.tensor([0, 1, 2, 3, 1])]
+    with torch.no_grad():
+        hidden = net.trunk(features, previous) if goal_heads else net.trunk(features, goals, previous)
+        value, advantage = net.value(hidden[:, :32]), net.advantage(hidden[:, 32:])
+        if goal_heads:  # the goal's own head
+            rows = goals.argmax(-1)
+            value = value[torch.arange(5), rows, None]
+            advantage = advantage.unflatten(-1, (GOALS, ACTIONS))[torch.arange(5), rows]
+        expected = value + advantage - advantage.mean(-1, keepdim=True)
+        assert torch.allclose(net(features, goals, previous), expected, atol=1e-6)
+        whole = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, hidden=(64,), features=FEATURES)
+        assert (whole.value.in_features, whole.advantage.in_features) == (64, 64)
+
+
+def test_released_weights_are_lecun_truncated_normals_in_every_layer_and_head():
+    torch.manual_seed(0)
+    net = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="released")
+    layers = [m for m in net.modules() if isinstance(m, nn.Conv2d | nn.Linear)]
+    assert len(layers) == 3 + 1 + 2  # the paper's convolutions, its dense layer, the two heads
+    for layer in layers:
+        bound = 2 * (1.0 / layer.weight[0].numel()) ** 0.5 / TRUNCATED_NORMAL_STD
+        assert torch.all(layer.bias == 0) and layer.weight.abs().max() <= bound
+    dense = net.trunk.dense[0].weight  # 512 x 5,191 draws: their deviation is LeCun's
+    assert dense.std().item() == pytest.approx((1.0 / dense.shape[1]) ** 0.5, rel=0.01)
+    ours = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS)
+    assert ours.value.weight.std() < 0.02 < net.value.weight.std()  # ours start the heads near zero
+    with pytest.raises(ValueError, match="weights_init must be 'he' or 'released', got 'glorot'"):
+        DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="glorot")

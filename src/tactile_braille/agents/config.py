@@ -42,6 +42,7 @@ TouchLabels = Literal["robot", "observation"]
 TargetUpdate = Literal["update", "epoch"]
 QLoss = Literal["mse", "huber"]
 GoalWeights = Literal["uniform", "relabel"]
+WeightsInit = Literal["he", "released"]
 Track = Literal["tactile", "proprio"]
 
 PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
@@ -117,6 +118,11 @@ class DQNConfig:
             sample it: the update is the relabelling's expected one, every goal computed).
         goal_heads: the goal picks one of the Q-network's heads (one per goal) instead of
             joining its dense layers as an input (the paper's).
+        dueling_split: the value head reads the first half of the last dense layer's units and
+            the advantage head the second half, as the released code (``False``: both read all).
+        weights_init: the networks' initial weights: ``"he"`` (ours: He-normal layers, heads near
+            zero) or ``"released"`` (the released code's: variance scaling 1.0 over the fan-in from
+            a truncated normal, LeCun's, for every layer and head).
     """
 
     gamma: float = 0.95
@@ -136,6 +142,8 @@ class DQNConfig:
     all_goals: bool = False
     all_goals_weights: GoalWeights = "uniform"
     goal_heads: bool = False
+    dueling_split: bool = False
+    weights_init: WeightsInit = "he"
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)

@@ -53,7 +53,8 @@ class DQNAgent(Agent):
         _, options = network_options(observation_space, self.config)
         self.q = DuelingQNetwork(
             self.num_actions, goal_size, previous_size, self.config.hidden,
-            goal_heads=self.config.goal_heads, **options,
+            goal_heads=self.config.goal_heads, dueling_split=self.config.dueling_split,
+            weights_init=self.config.weights_init, **options,
         ).to(self.device)  # fmt: skip
         self.target = copy.deepcopy(self.q).requires_grad_(False)
         self.optimiser = adam(self.q.parameters(), self.config.learning_rate, self.config.adam_eps)

@@ -116,6 +116,21 @@ def _dueling(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
     return value + advantage - advantage.mean(dim=-1, keepdim=True)
 
 
+TRUNCATED_NORMAL_STD = 0.87962566103423978
+"""The deviation of a unit normal truncated at +-2: TensorFlow divides by it so that the truncated
+draws keep the wanted variance."""
+
+
+def released_init(module: nn.Module) -> None:
+    """The released code's initial weights for a convolution or dense layer, else nothing: variance
+    scaling 1.0 over the fan-in from a normal truncated at two deviations (TensorFlow's
+    ``variance_scaling(scale=1.0)``, LeCun's), zero biases. For ``module.apply(released_init)``."""
+    if isinstance(module, nn.Conv2d | nn.Linear):
+        std = math.sqrt(1.0 / module.weight[0].numel()) / TRUNCATED_NORMAL_STD
+        nn.init.trunc_normal_(module.weight, std=std, a=-2 * std, b=2 * std)
+        nn.init.zeros_(module.bias)
+
+
 def _goal_row(every: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
     """Each observation's row of ``every`` (B, goal_size, ...) for its goal one-hot (B, goal_size)."""
     return (every * goals.to(every.dtype).reshape(*goals.shape, *[1] * (every.dim() - 2))).sum(dim=1)
@@ -136,6 +151,9 @@ class DuelingQNetwork(nn.Module):
         hidden: units of the dense layers (the paper's 512).
         encoder: an encoder to share (detached), or None.
         goal_heads: heads for every goal instead of the goal as an input.
+        dueling_split: the value head reads the first half of the last dense layer's units, the
+            advantage head the rest (the released code's); otherwise both read all of them.
+        weights_init: ``"he"`` (ours) or ``"released"`` (:func:`released_init` for every layer).
         options: ``features`` and ``layer_norm`` of :class:`GoalConditionedTrunk`.
     """
 
@@ -147,33 +165,44 @@ class DuelingQNetwork(nn.Module):
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
         goal_heads: bool = False,
+        dueling_split: bool = False,
+        weights_init: str = "he",
         **options,
     ) -> None:
         super().__init__()
+        if weights_init not in ("he", "released"):
+            raise ValueError(f"weights_init must be 'he' or 'released', got {weights_init!r}")
         self.goal_heads, self.goal_size, self.num_actions = goal_heads, goal_size, num_actions
         vector_size = previous_action_size if goal_heads else goal_size + previous_action_size
         heads = goal_size if goal_heads else 1
         self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
-        self.value = _small_head(self.trunk.features, heads)
-        self.advantage = _small_head(self.trunk.features, heads * num_actions)
+        units = self.trunk.features
+        self.split = units // 2 if dueling_split else 0
+        self.value = _small_head(self.split or units, heads)
+        self.advantage = _small_head(units - self.split, heads * num_actions)
+        if weights_init == "released":
+            self.apply(released_init)
 
     def forward(
         self, images: torch.Tensor, goals: torch.Tensor, previous_actions: torch.Tensor
     ) -> torch.Tensor:
         if self.goal_heads:
             return _goal_row(self.every_goal(images, previous_actions), goals)
-        hidden = self.trunk(images, goals, previous_actions)
-        return _dueling(self.value(hidden), self.advantage(hidden))
+        return _dueling(*self._heads(self.trunk(images, goals, previous_actions)))
 
     def every_goal(self, images: torch.Tensor, previous_actions: torch.Tensor) -> torch.Tensor:
         """Q-values under every goal, shape (B, goal_size, num_actions), from one pass of the
         encoder: with ``goal_heads`` from every head, else the dense layers run once per goal."""
         if self.goal_heads:
-            hidden = self.trunk(images, previous_actions)
-            advantage = self.advantage(hidden).unflatten(-1, (self.goal_size, self.num_actions))
-            return _dueling(self.value(hidden)[..., None], advantage)
-        hidden = self.trunk.every_goal(images, previous_actions, self.goal_size)
-        return _dueling(self.value(hidden), self.advantage(hidden))
+            value, advantage = self._heads(self.trunk(images, previous_actions))
+            return _dueling(value[..., None], advantage.unflatten(-1, (self.goal_size, self.num_actions)))
+        return _dueling(*self._heads(self.trunk.every_goal(images, previous_actions, self.goal_size)))
+
+    def _heads(self, hidden: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The value and advantage heads' outputs, each on its half of the units where split."""
+        if self.split:
+            return self.value(hidden[..., : self.split]), self.advantage(hidden[..., self.split :])
+        return self.value(hidden), self.advantage(hidden)
 
 
 class PolicyNetwork(nn.Module):
