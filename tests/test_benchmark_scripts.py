@@ -1,0 +1,46 @@
+"""Scripts of benchmarks/ that read training runs, run on tiny runs made here."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_braille.agents import DiscreteSACConfig, DQNConfig, TrainConfig, train
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+ARROWS = "tactile_braille/DiscreteArrows-v0"
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _tiny_run(env_datasets, folder: Path, algo: str, agent) -> Path:
+    config = TrainConfig(task=ARROWS, algo=algo, epochs=1, steps_per_epoch=30, start_steps=20, threads=1,
+                         dataset=str(env_datasets[ARROWS]), agent=agent,
+                         evaluation={"test_episodes": 1})  # fmt: skip
+    return train(config, run_dir=folder, progress=False)
+
+
+def test_policy_critic_agreement_measures_where_the_policy_leaves_its_critics(env_datasets, tmp_path):
+    script = _load("policy_critic_agreement")
+    run = _tiny_run(
+        env_datasets, tmp_path / "sac", "sac_discrete", DiscreteSACConfig(hidden=(16,), batch_size=8)
+    )
+    env, agent, epoch = script.load_agent(run)
+    assert epoch == 0
+    rows = script.step_measures(env, agent, episodes=3, seed=0)
+    agree, regret, gap, presses, best_presses, confidence = rows.T
+    assert len(rows) >= 3 and set(np.unique(agree)) <= {0.0, 1.0}
+    assert np.all(regret >= 0) and np.all(regret[agree == 1] == 0) and np.all(regret[agree == 0] > 0)
+    assert np.all(gap >= 0) and np.all((confidence > 0.2) & (confidence <= 1.0))  # five actions
+    assert np.all(presses[agree == 1] == best_presses[agree == 1])  # the same action where they agree
+    dqn = _tiny_run(env_datasets, tmp_path / "dqn", "dqn", DQNConfig(hidden=(16,), batch_size=8))
+    with pytest.raises(ValueError, match="a dqn run; this compares a discrete SAC"):
+        script.load_agent(dqn)
