@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 import torch
 from torch import nn
+from torch.nn import functional as F
 
-from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK, HIDDEN, through_file
+from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK, HIDDEN, same_weights, through_file
 from feature_agents import ACTIONS, FEATURES, GOALS, PREVIOUS, batch, make
 from tactile_braille.agents import AGENTS
 from tactile_braille.agents.common import POSE_SIZE
@@ -561,6 +562,27 @@ def test_dqn_builds_the_released_codes_dueling_network_where_asked(tasks):
     assert build("dqn", tasks).q.split == 0
     losses = agent.update(make_batch("dqn", tasks))
     assert np.isfinite(losses["losses/q_loss"])
+
+
+def test_an_inverse_dynamics_loss_trains_the_q_networks_encoder_to_tell_the_action(tasks):
+    """The auxiliary head guesses each transition's action from the encoder's features of its two frames;
+    its loss is the cross-entropy of that guess and reaches the encoder, not the TD loss's value."""
+    data = make_batch("dqn", tasks)
+    plain, helped = build("dqn", tasks), build("dqn", tasks, inverse_dynamics=0.5)
+    assert same_weights(plain.q, helped.q)  # the head is made after the Q-network: the same start
+    with torch.no_grad():
+        t = helped.tensors(data)
+        current, following = helped.q.trunk.encode(torch.cat([t["images"], t["next_images"]])).chunk(2)
+        expected = F.cross_entropy(helped.inverse(current, following), t["actions"])
+    losses, plain_losses = helped.update(data), plain.update(data)
+    assert losses["losses/inverse_loss"] == pytest.approx(expected.item(), rel=1e-5)
+    assert losses["losses/q_loss"] == pytest.approx(plain_losses["losses/q_loss"], rel=1e-6)
+    assert "losses/inverse_loss" not in plain_losses
+    encoder, plain_encoder = helped.q.trunk.encoder, plain.q.trunk.encoder
+    assert not same_weights(encoder, plain_encoder)  # the head's gradient reached the encoder
+    assert "inverse" in helped.state_dict() and "inverse" not in plain.state_dict()
+    with pytest.raises(ValueError, match=r"inverse_dynamics is a loss weight: at least 0, got -1\.0"):
+        build("dqn", tasks, inverse_dynamics=-1.0)
 
 
 def relabelled_to(data: dict[str, np.ndarray], goal: int) -> dict[str, np.ndarray]:

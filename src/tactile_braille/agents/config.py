@@ -66,6 +66,8 @@ def _check_hyperparameters(config) -> None:
         problems.append(f"gamma must be in [0, 1], got {config.gamma}")
     if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
         problems.append(f"tau must be in (0, 1], got {config.tau}")
+    if getattr(config, "inverse_dynamics", 0.0) < 0:
+        problems.append(f"inverse_dynamics is a loss weight: at least 0, got {config.inverse_dynamics}")
     for name in ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps"):
         if getattr(config, name, 1.0) <= 0:
             problems.append(f"{name} must be positive, got {getattr(config, name)}")
@@ -123,6 +125,9 @@ class DQNConfig:
         weights_init: the networks' initial weights: ``"he"`` (ours: He-normal layers, heads near
             zero) or ``"released"`` (the released code's: variance scaling 1.0 over the fan-in from
             a truncated normal, LeCun's, for every layer and head).
+        inverse_dynamics: the weight of an auxiliary loss on the Q-network's encoder: a head
+            predicts each transition's action from the encoder's features of its two frames
+            (inverse dynamics; the action is the next observation's previous action). 0: none.
     """
 
     gamma: float = 0.95
@@ -144,6 +149,7 @@ class DQNConfig:
     goal_heads: bool = False
     dueling_split: bool = False
     weights_init: WeightsInit = "he"
+    inverse_dynamics: float = 0.0
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)

@@ -18,7 +18,12 @@ from torch.nn import functional as F
 
 from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
 from tactile_braille.agents.config import DQNConfig
-from tactile_braille.agents.networks import DuelingQNetwork, observation_tensors, soft_update
+from tactile_braille.agents.networks import (
+    DuelingQNetwork,
+    InverseDynamicsHead,
+    observation_tensors,
+    soft_update,
+)
 from tactile_braille.supervised.fit import adam
 
 
@@ -57,7 +62,13 @@ class DQNAgent(Agent):
             weights_init=self.config.weights_init, **options,
         ).to(self.device)  # fmt: skip
         self.target = copy.deepcopy(self.q).requires_grad_(False)
-        self.optimiser = adam(self.q.parameters(), self.config.learning_rate, self.config.adam_eps)
+        learnt = list(self.q.parameters())
+        self.inverse = None
+        if self.config.inverse_dynamics > 0:
+            self.inverse = InverseDynamicsHead(self.q.trunk.encoded, self.num_actions).to(self.device)
+            learnt += list(self.inverse.parameters())
+            self.checkpointed = (*self.checkpointed, "inverse")
+        self.optimiser = adam(learnt, self.config.learning_rate, self.config.adam_eps)
 
     def epsilon(self, step: int) -> float:
         """Exploration rate after ``step`` environment steps (held for ``schedule_interval`` steps)."""
@@ -92,12 +103,24 @@ class DQNAgent(Agent):
         with self.autocast():
             q, target = self._all_goals_values(t) if self.config.all_goals else self._values(t)
             loss = self._loss(q, target, t)
+            inverse_loss = self._inverse_loss(t) if self.inverse is not None else None
+        total = loss if inverse_loss is None else loss + self.config.inverse_dynamics * inverse_loss
         self.optimiser.zero_grad(set_to_none=True)
-        loss.backward()
+        total.backward()
         self.optimiser.step()
         if self.config.target_update == "update":
             soft_update(self.q, self.target, self.config.tau)
-        return {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
+        losses = {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
+        if inverse_loss is not None:
+            losses["losses/inverse_loss"] = inverse_loss.item()
+        return losses
+
+    def _inverse_loss(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Cross-entropy of the inverse-dynamics head's guess of each transition's action, from the
+        Q-network's encoder on both frames (one pass over the two batches)."""
+        features = self.q.trunk.encode(torch.cat([t["images"], t["next_images"]]))
+        logits = self.inverse(*features.chunk(2)).float()
+        return F.cross_entropy(logits, t["actions"])
 
     def _loss(self, q: torch.Tensor, target: torch.Tensor, t: dict[str, torch.Tensor]) -> torch.Tensor:
         """The TD loss, averaged over the batch and its goals (alike, or as ``all_goals_weights``)."""

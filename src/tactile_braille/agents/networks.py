@@ -79,6 +79,8 @@ class GoalConditionedTrunk(nn.Module):
         self.dense = nn.Sequential(*layers)
         self.dense.apply(he_init)
         self.features = sizes[-1]
+        self.encoded = features or Encoder.output_size
+        """Length of :meth:`encode`'s features."""
 
     def encode(self, images: torch.Tensor) -> torch.Tensor:
         """The features the dense layers take before the vectors: the encoder's, or the vector given."""
@@ -203,6 +205,22 @@ class DuelingQNetwork(nn.Module):
         if self.split:
             return self.value(hidden[..., : self.split]), self.advantage(hidden[..., self.split :])
         return self.value(hidden), self.advantage(hidden)
+
+
+class InverseDynamicsHead(nn.Module):
+    """Logits of the action taken between two frames, from an encoder's features of both: an auxiliary
+    task whose gradients shape the encoder (the action is in the next observation, so it is ``tactile``).
+    """
+
+    def __init__(self, features: int, num_actions: int, hidden: int = 256) -> None:
+        super().__init__()
+        self.layers = nn.Sequential(
+            nn.Linear(2 * features, hidden), nn.ReLU(), nn.Linear(hidden, num_actions)
+        )
+        self.layers.apply(he_init)
+
+    def forward(self, features: torch.Tensor, next_features: torch.Tensor) -> torch.Tensor:
+        return self.layers(torch.cat([features, next_features], dim=-1))
 
 
 class PolicyNetwork(nn.Module):
