@@ -55,9 +55,13 @@ RELEASED = {
     "dqn": {
         "agent.test_epsilon": (0.0, 0.05), "agent.target_update": ("update", "epoch"),
         "agent.tau": (0.005, 0.995), "agent.schedule_interval": (1, 250),
+        "agent.dueling_split": (False, True), "agent.weights_init": ("he", "released"),
+        "update_after": (None, 1),
     },
-    "sac_discrete": {"agent.initial_alpha": (1.0, pytest.approx(np.exp(0.1 * np.log(5))))},
-    "sac": {"agent.hidden": ([512], [1024, 512]), "max_episode_steps": (25, 35)},
+    "sac_discrete": {
+        "agent.initial_alpha": (1.0, pytest.approx(np.exp(0.1 * np.log(5)))), "update_after": (None, 1),
+    },
+    "sac": {"agent.hidden": ([512], [1024, 512]), "max_episode_steps": (25, 35), "update_after": (None, 1)},
     "td3": {
         "agent.learning_rate": (5e-5, 7.5e-5), "update_every": (1, 100), "agent.schedule_interval": (1, 250),
     },
@@ -92,8 +96,10 @@ def test_released_preset_values():
         "mse",
         1e-4,
     )
+    assert (dqn.dueling_split, dqn.weights_init) == (True, "released")
     assert preset_differences("released", DISCRETE_TASK, "sac_discrete") == [
-        "agent.initial_alpha: 1.0 -> 1.174618943088019"
+        "agent.initial_alpha: 1.0 -> 1.174618943088019",
+        "update_after: None -> 1",
     ]
 
 

@@ -76,13 +76,23 @@ paper's 872 convergence epochs (issue 21's target)."""
 
 RELEASED_CHANGES: dict[str, dict[str, Any]] = {
     # The target moves 99.5 % of the way to the online network once per epoch (its `polyak: 0.005` is
-    # the share the target keeps); epsilon steps down once per epoch; tests explore with 0.05.
+    # the share the target keeps); epsilon steps down once per epoch; tests explore with 0.05. Its
+    # dueling heads each read half of the dense units, and every layer starts from TensorFlow's
+    # variance scaling (since session 15; the rows run before it depart from it, and say so).
     "dqn": {
-        "agent": {"test_epsilon": 0.05, "target_update": "epoch", "tau": 0.995, "schedule_interval": 250}
+        "agent": {
+            "test_epsilon": 0.05,
+            "target_update": "epoch",
+            "tau": 0.995,
+            "schedule_interval": 250,
+            "dueling_split": True,
+            "weights_init": "released",
+        },
+        "update_after": 1,
     },
     # log alpha starts at the target entropy, 0.1 ln 5: alpha = 5 ** 0.1.
-    "sac_discrete": {"agent": {"initial_alpha": 5**0.1}},
-    "sac": {"agent": {"hidden": (1024, 512)}, "max_episode_steps": 35},
+    "sac_discrete": {"agent": {"initial_alpha": 5**0.1}, "update_after": 1},
+    "sac": {"agent": {"hidden": (1024, 512)}, "max_episode_steps": 35, "update_after": 1},
     "td3": {"agent": {"learning_rate": 7.5e-5, "schedule_interval": 250}, "update_every": 100},
 }
 """What the released code changes from the paper's Table II, per algorithm (docs/agents.md tables each
