@@ -25,24 +25,16 @@ import numpy as np
 import torch
 
 from tactile_braille.agents.networks import observation_tensors
-from tactile_braille.agents.run import CHECKPOINT_FILE, read_config
-from tactile_braille.agents.training import make_agent, make_env
+from tactile_braille.agents.report import load_run
+from tactile_braille.agents.run import read_config, read_progress
 
 
 def load_agent(run: Path):
-    """The run's environment and its agent at the last checkpoint."""
-    config = read_config(run)
-    if config.algo != "sac_discrete":
-        raise ValueError(
-            f"{run}: a {config.algo} run; this compares a discrete SAC's policy with its critics"
-        )
-    if not (run / CHECKPOINT_FILE).exists():
-        raise ValueError(f"{run}: no {CHECKPOINT_FILE} (records under results/ keep none)")
-    env = make_env(config)
-    agent = make_agent(config, env)
-    state = torch.load(run / CHECKPOINT_FILE, map_location="cpu", weights_only=False)
-    agent.load_state_dict(state["agent"])
-    return env, agent, state["epoch"]
+    """The run's environment, its agent at the last checkpoint, and that checkpoint's epoch (from 0)."""
+    if (algo := read_config(run).algo) != "sac_discrete":
+        raise ValueError(f"{run}: a {algo} run; this compares a discrete SAC's policy and critics")
+    _, env, agent = load_run(run)
+    return env, agent, len(read_progress(run)) - 1
 
 
 @torch.no_grad()
