@@ -13,6 +13,7 @@ from tactile_braille.agents.presets import preset_config
 from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
+    _reached_cell,
     bootstrap_ci,
     compared_groups,
     grid_label,
@@ -56,6 +57,15 @@ def record(task, algo, seed, returns, accuracy=None, steps=None, reset=None):
                      typing=typing)  # fmt: skip
 
 
+def test_the_first_epoch_at_095_says_within_how_many_epochs_the_others_did_not_reach_it():
+    assert _reached_cell([4, 6], [100, 100]) == "5.0 [4.0, 6.0]"
+    assert (
+        _reached_cell([4, None, None], [10, 100, 120]) == "1/3 reached, not by epochs 100-120; 4.0 (one run)"
+    )
+    assert _reached_cell([None], [54]) == "0/1 reached, not by epoch 54"
+    assert _reached_cell([None, 3]) == "1/2 reached; 3.0 (one run)"  # epochs unknown: the count alone
+
+
 def test_results_table_has_the_papers_shape_and_numbers():
     records = [
         record("DiscreteArrows-v0", "dqn", 0, [0.2, 0.96, 1.0], 1.0, 240),
@@ -77,7 +87,7 @@ def test_results_table_has_the_papers_shape_and_numbers():
     )
     assert "2.5 [2.0, 3.0]" in arrows_dqn  # convergence epochs 2 and 3 (95 % of 1.0; counted from 1)
     assert arrows_dqn.endswith("| 230 | 1.000 | 8 |")  # the paper's Table III
-    assert "0/1 reached" in table[3]  # discrete SAC never reached 0.95
+    assert "| 0/1 reached, not by epoch 3 |" in table[3]  # discrete SAC never reached 0.95 in its 3 epochs
     assert "| 400 (one run) |" in table[3]
     with pytest.raises(ValueError, match="repeats seed 0"):
         group([*records, record("DiscreteArrows-v0", "dqn", 0, [0.5])])

@@ -309,7 +309,7 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
         )
         reset_accuracy = _stat([t["accuracy"] for t in reset], 3)
         convergence = _stat([r.convergence for r in records], 1)
-        reached_text = _reached_cell([r.reached_095 for r in records])
+        reached_text = _reached_cell([r.reached_095 for r in records], [len(r.returns) for r in records])
         paper = PAPER_TABLE.get(("sim", task, algo))
         paper_cells = [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
         lines.append(
@@ -321,12 +321,19 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     return "\n".join(lines)
 
 
-def _reached_cell(reached: list[int | None]) -> str:
-    """First epochs at 0.95 over seeds; how many reached it where some did not."""
+def _reached_cell(reached: list[int | None], epochs: list[int] | None = None) -> str:
+    """First epochs at 0.95 over seeds; how many reached it where some did not, and, given the epochs
+    each run ran (``epochs``), within how many the others did not (``not by epoch 100``)."""
     if all(e is not None for e in reached):
         return _stat(reached, 1)
     some = any(e is not None for e in reached)
-    return f"{sum(e is not None for e in reached)}/{len(reached)} reached" + (
+    budget = ""
+    if epochs is not None:
+        short = sorted({n for e, n in zip(reached, epochs, strict=True) if e is None})
+        budget = (
+            f", not by epoch {short[0]}" if len(short) == 1 else f", not by epochs {short[0]}-{short[-1]}"
+        )
+    return f"{sum(e is not None for e in reached)}/{len(reached)} reached{budget}" + (
         f"; {_stat(reached, 1)}" if some else ""
     )
 
