@@ -564,6 +564,17 @@ def test_dqn_builds_the_released_codes_dueling_network_where_asked(tasks):
     assert np.isfinite(losses["losses/q_loss"])
 
 
+def test_discrete_sac_builds_the_released_codes_plain_critics_and_initial_weights_where_asked(tasks):
+    agent = build("sac_discrete", tasks, dueling=False, weights_init="released")
+    for critic in (*agent.critics, *agent.targets):
+        assert critic.value is None
+    assert torch.all(agent.critics[0].advantage.bias == 0) and agent.critics[0].advantage.weight.std() > 0.1
+    assert agent.actor.logits.weight.std() > 0.1  # not near zero, as ours
+    assert build("sac_discrete", tasks).critics[0].value is not None  # dueling critics by default
+    losses = agent.update(make_batch("sac_discrete", tasks))
+    assert all(np.isfinite(value) for value in losses.values())
+
+
 def test_an_inverse_dynamics_loss_trains_the_q_networks_encoder_to_tell_the_action(tasks):
     """The auxiliary head guesses each transition's action from the encoder's features of its two frames;
     its loss is the cross-entropy of that guess and reaches the encoder, not the TD loss's value."""

@@ -1,5 +1,5 @@
 """The networks (agents/networks.py): the squashed Gaussian policy's log-probabilities, critics with poses,
-the released code's dueling split and initial weights."""
+the released code's dueling split, plain Q heads and initial weights."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     DuelingQNetwork,
     GaussianPolicy,
+    PolicyNetwork,
 )
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -119,3 +120,40 @@ def test_released_weights_are_lecun_truncated_normals_in_every_layer_and_head():
     assert ours.value.weight.std() < 0.02 < net.value.weight.std()  # ours start the heads near zero
     with pytest.raises(ValueError, match="weights_init must be 'he' or 'released', got 'glorot'"):
         DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="glorot")
+
+
+@pytest.mark.parametrize("goal_heads", [False, True])
+def test_plain_q_heads_give_the_head_s_outputs_as_q_values(goal_heads):
+    """``dueling=False`` (the released discrete SAC's critics): no value head; the one head's outputs,
+    the goal's row of them with goal heads, are the Q-values, under one goal and under every goal."""
+    torch.manual_seed(0)
+    net = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, hidden=(64,), features=FEATURES, goal_heads=goal_heads,
+                          dueling=False)  # fmt: skip
+    assert net.value is None and net.advantage.in_features == 64
+    features, previous = torch.randn(5, FEATURES), torch.randn(5, PREVIOUS)
+    goals = torch.eye(GOALS)[torch.tensor([0, 1, 2, 3, 1])]
+    with torch.no_grad():
+        hidden = net.trunk(features, previous) if goal_heads else net.trunk(features, goals, previous)
+        expected = net.advantage(hidden)
+        if goal_heads:
+            expected = expected.unflatten(-1, (GOALS, ACTIONS))[torch.arange(5), goals.argmax(-1)]
+        assert torch.allclose(net(features, goals, previous), expected, atol=1e-6)
+        every = net.every_goal(features, previous)
+        assert every.shape == (5, GOALS, ACTIONS)
+        assert torch.allclose(every[torch.arange(5), goals.argmax(-1)], expected, atol=1e-6)
+        assert not torch.allclose(expected - expected.mean(-1, keepdim=True), expected)  # not centred
+    with pytest.raises(ValueError, match="dueling_split splits a dueling network's units"):
+        DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, features=FEATURES, dueling=False, dueling_split=True)
+
+
+def test_the_policy_network_takes_the_released_initial_weights_where_asked():
+    torch.manual_seed(0)
+    policy = PolicyNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="released")
+    layers = [m for m in policy.modules() if isinstance(m, nn.Conv2d | nn.Linear)]
+    assert len(layers) == 3 + 1 + 1  # the paper's convolutions, its dense layer, the logits head
+    for layer in layers:
+        bound = 2 * (1.0 / layer.weight[0].numel()) ** 0.5 / TRUNCATED_NORMAL_STD
+        assert torch.all(layer.bias == 0) and layer.weight.abs().max() <= bound
+    assert PolicyNetwork(ACTIONS, GOALS, PREVIOUS).logits.weight.std() < 0.02 < policy.logits.weight.std()
+    with pytest.raises(ValueError, match="weights_init must be 'he' or 'released', got 'xavier'"):
+        PolicyNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="xavier")

@@ -222,6 +222,10 @@ class DiscreteSACConfig:
             transition. ``False``: the sampled goal only.
         goal_heads: the goal picks one of the critics' and the actor's heads (one per goal)
             instead of joining their dense layers as an input (the paper's).
+        dueling: the critics' heads: dueling (value and advantage; ours) or,
+            ``False``, one head of Q-values (the released code's; the paper names dueling heads
+            for its DQN only).
+        weights_init: the actor's and critics' initial weights, as :class:`DQNConfig`'s.
     """
 
     gamma: float = 0.6
@@ -237,6 +241,8 @@ class DiscreteSACConfig:
     shared_encoder: bool = False
     all_goals: bool = False
     goal_heads: bool = False
+    dueling: bool = True
+    weights_init: WeightsInit = "he"
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)

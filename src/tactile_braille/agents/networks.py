@@ -113,8 +113,11 @@ def _small_head(inputs: int, outputs: int) -> nn.Linear:
     return head
 
 
-def _dueling(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
-    """``Q = V + A - mean(A)`` over the last (action) axis; ``value`` has a size-1 axis in its place."""
+def _dueling(value: torch.Tensor | None, advantage: torch.Tensor) -> torch.Tensor:
+    """``Q = V + A - mean(A)`` over the last (action) axis; ``value`` has a size-1 axis in its place.
+    Without a value head (``None``: plain Q heads) the advantage head's outputs are the Q-values."""
+    if value is None:
+        return advantage
     return value + advantage - advantage.mean(dim=-1, keepdim=True)
 
 
@@ -133,13 +136,20 @@ def released_init(module: nn.Module) -> None:
         nn.init.zeros_(module.bias)
 
 
+def check_weights_init(weights_init: str) -> None:
+    """Refuse an initialisation other than ``"he"`` (ours) and ``"released"``."""
+    if weights_init not in ("he", "released"):
+        raise ValueError(f"weights_init must be 'he' or 'released', got {weights_init!r}")
+
+
 def _goal_row(every: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
     """Each observation's row of ``every`` (B, goal_size, ...) for its goal one-hot (B, goal_size)."""
     return (every * goals.to(every.dtype).reshape(*goals.shape, *[1] * (every.dim() - 2))).sum(dim=1)
 
 
 class DuelingQNetwork(nn.Module):
-    """Q-values of discrete actions with a dueling head: ``Q = V + A - mean(A)``.
+    """Q-values of discrete actions with a dueling head: ``Q = V + A - mean(A)`` (or, with
+    ``dueling=False``, a plain head of Q-values).
 
     With ``goal_heads`` the goal does not join the trunk: the heads give every goal's
     values at once (``V`` per goal, ``A`` per goal and action), and the goal one-hot
@@ -156,6 +166,8 @@ class DuelingQNetwork(nn.Module):
         dueling_split: the value head reads the first half of the last dense layer's units, the
             advantage head the rest (the released code's); otherwise both read all of them.
         weights_init: ``"he"`` (ours) or ``"released"`` (:func:`released_init` for every layer).
+        dueling: a value and an advantage head; ``False``: one head of Q-values (the released
+            discrete SAC's critics), which leaves ``dueling_split`` nothing to split.
         options: ``features`` and ``layer_norm`` of :class:`GoalConditionedTrunk`.
     """
 
@@ -169,18 +181,20 @@ class DuelingQNetwork(nn.Module):
         goal_heads: bool = False,
         dueling_split: bool = False,
         weights_init: str = "he",
+        dueling: bool = True,
         **options,
     ) -> None:
         super().__init__()
-        if weights_init not in ("he", "released"):
-            raise ValueError(f"weights_init must be 'he' or 'released', got {weights_init!r}")
+        check_weights_init(weights_init)
+        if dueling_split and not dueling:
+            raise ValueError("dueling_split splits a dueling network's units: it needs dueling=True")
         self.goal_heads, self.goal_size, self.num_actions = goal_heads, goal_size, num_actions
         vector_size = previous_action_size if goal_heads else goal_size + previous_action_size
         heads = goal_size if goal_heads else 1
         self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
         units = self.trunk.features
         self.split = units // 2 if dueling_split else 0
-        self.value = _small_head(self.split or units, heads)
+        self.value = _small_head(self.split or units, heads) if dueling else None
         self.advantage = _small_head(units - self.split, heads * num_actions)
         if weights_init == "released":
             self.apply(released_init)
@@ -197,14 +211,16 @@ class DuelingQNetwork(nn.Module):
         encoder: with ``goal_heads`` from every head, else the dense layers run once per goal."""
         if self.goal_heads:
             value, advantage = self._heads(self.trunk(images, previous_actions))
-            return _dueling(value[..., None], advantage.unflatten(-1, (self.goal_size, self.num_actions)))
+            value = None if value is None else value[..., None]
+            return _dueling(value, advantage.unflatten(-1, (self.goal_size, self.num_actions)))
         return _dueling(*self._heads(self.trunk.every_goal(images, previous_actions, self.goal_size)))
 
-    def _heads(self, hidden: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The value and advantage heads' outputs, each on its half of the units where split."""
+    def _heads(self, hidden: torch.Tensor) -> tuple[torch.Tensor | None, torch.Tensor]:
+        """The value and advantage heads' outputs, each on its half of the units where split (no
+        value without a value head)."""
         if self.split:
             return self.value(hidden[..., : self.split]), self.advantage(hidden[..., self.split :])
-        return self.value(hidden), self.advantage(hidden)
+        return (None if self.value is None else self.value(hidden)), self.advantage(hidden)
 
 
 class InverseDynamicsHead(nn.Module):
@@ -227,7 +243,8 @@ class PolicyNetwork(nn.Module):
     """Categorical policy over discrete actions (same trunk, a logits head).
 
     ``goal_heads`` and :meth:`every_goal` as :class:`DuelingQNetwork`'s: a logits head per goal
-    instead of the goal as an input, and every goal's probabilities from one pass of the encoder.
+    instead of the goal as an input, and every goal's probabilities from one pass of the encoder;
+    ``weights_init`` as its too.
     """
 
     def __init__(
@@ -238,13 +255,17 @@ class PolicyNetwork(nn.Module):
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
         goal_heads: bool = False,
+        weights_init: str = "he",
         **options,
     ) -> None:
         super().__init__()
+        check_weights_init(weights_init)
         self.goal_heads, self.goal_size, self.num_actions = goal_heads, goal_size, num_actions
         vector_size = previous_action_size if goal_heads else goal_size + previous_action_size
         self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
         self.logits = _small_head(self.trunk.features, (goal_size if goal_heads else 1) * num_actions)
+        if weights_init == "released":
+            self.apply(released_init)
 
     def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor]:
         """Action probabilities and their logs."""

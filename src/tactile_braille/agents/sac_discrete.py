@@ -58,6 +58,8 @@ class DiscreteSACAgent(Agent):
         sizes = (self.num_actions, *spaces_sizes(observation_space), config.hidden)
         actor_options, critic_options = network_options(observation_space, config)
         actor_options["goal_heads"] = critic_options["goal_heads"] = config.goal_heads
+        actor_options["weights_init"] = critic_options["weights_init"] = config.weights_init
+        critic_options["dueling"] = config.dueling
         self.critics = nn.ModuleList([DuelingQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
             self.device
         )
