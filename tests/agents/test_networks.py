@@ -106,14 +106,20 @@ def test_a_split_dueling_head_reads_half_the_units_each(goal_heads):
         assert (whole.value.in_features, whole.advantage.in_features) == (64, 64)
 
 
-def test_released_weights_are_lecun_truncated_normals_in_every_layer_and_head():
-    torch.manual_seed(0)
-    net = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="released")
-    layers = [m for m in net.modules() if isinstance(m, nn.Conv2d | nn.Linear)]
-    assert len(layers) == 3 + 1 + 2  # the paper's convolutions, its dense layer, the two heads
+def released_layers(network: nn.Module) -> int:
+    """Check that every convolution and dense layer of ``network`` has zero biases and weights within
+    two LeCun deviations (the released code's truncated normals); returns how many there are."""
+    layers = [m for m in network.modules() if isinstance(m, nn.Conv2d | nn.Linear)]
     for layer in layers:
         bound = 2 * (1.0 / layer.weight[0].numel()) ** 0.5 / TRUNCATED_NORMAL_STD
         assert torch.all(layer.bias == 0) and layer.weight.abs().max() <= bound
+    return len(layers)
+
+
+def test_released_weights_are_lecun_truncated_normals_in_every_layer_and_head():
+    torch.manual_seed(0)
+    net = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="released")
+    assert released_layers(net) == 3 + 1 + 2  # the paper's convolutions, its dense layer, the two heads
     dense = net.trunk.dense[0].weight  # 512 x 5,191 draws: their deviation is LeCun's
     assert dense.std().item() == pytest.approx((1.0 / dense.shape[1]) ** 0.5, rel=0.01)
     ours = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS)
@@ -149,11 +155,7 @@ def test_plain_q_heads_give_the_head_s_outputs_as_q_values(goal_heads):
 def test_the_policy_network_takes_the_released_initial_weights_where_asked():
     torch.manual_seed(0)
     policy = PolicyNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="released")
-    layers = [m for m in policy.modules() if isinstance(m, nn.Conv2d | nn.Linear)]
-    assert len(layers) == 3 + 1 + 1  # the paper's convolutions, its dense layer, the logits head
-    for layer in layers:
-        bound = 2 * (1.0 / layer.weight[0].numel()) ** 0.5 / TRUNCATED_NORMAL_STD
-        assert torch.all(layer.bias == 0) and layer.weight.abs().max() <= bound
+    assert released_layers(policy) == 3 + 1 + 1  # the paper's convolutions, its dense layer, the logits head
     assert PolicyNetwork(ACTIONS, GOALS, PREVIOUS).logits.weight.std() < 0.02 < policy.logits.weight.std()
     with pytest.raises(ValueError, match="weights_init must be 'he' or 'released', got 'xavier'"):
         PolicyNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="xavier")
