@@ -60,6 +60,7 @@ RELEASED = {
     },
     "sac_discrete": {
         "agent.initial_alpha": (1.0, pytest.approx(np.exp(0.1 * np.log(5)))), "update_after": (None, 1),
+        "agent.dueling": (True, False), "agent.weights_init": ("he", "released"),
     },
     "sac": {"agent.hidden": ([512], [1024, 512]), "max_episode_steps": (25, 35), "update_after": (None, 1)},
     "td3": {
@@ -98,7 +99,9 @@ def test_released_preset_values():
     )
     assert (dqn.dueling_split, dqn.weights_init) == (True, "released")
     assert preset_differences("released", DISCRETE_TASK, "sac_discrete") == [
+        "agent.dueling: True -> False",
         "agent.initial_alpha: 1.0 -> 1.174618943088019",
+        "agent.weights_init: 'he' -> 'released'",
         "update_after: None -> 1",
     ]
 

@@ -90,8 +90,12 @@ RELEASED_CHANGES: dict[str, dict[str, Any]] = {
         },
         "update_after": 1,
     },
-    # log alpha starts at the target entropy, 0.1 ln 5: alpha = 5 ** 0.1.
-    "sac_discrete": {"agent": {"initial_alpha": 5**0.1}, "update_after": 1},
+    # log alpha starts at the target entropy, 0.1 ln 5: alpha = 5 ** 0.1. Its critics have one head of
+    # Q-values (no dueling), and every layer starts from TensorFlow's variance scaling (since session 17).
+    "sac_discrete": {
+        "agent": {"initial_alpha": 5**0.1, "dueling": False, "weights_init": "released"},
+        "update_after": 1,
+    },
     "sac": {"agent": {"hidden": (1024, 512)}, "max_episode_steps": 35, "update_after": 1},
     "td3": {"agent": {"learning_rate": 7.5e-5, "schedule_interval": 250}, "update_every": 100},
 }
