@@ -67,6 +67,8 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = "render", ["render"]
         if name == "frame_noise":
             value, words = (1.0, 2.0), ["1.0", "2.0"]
+        if name == "taps":  # given as its default: the touch encoder reads one tap (test_config)
+            value, words = 1, ["1"]
         if name == "replay.n_step":  # given as its default: all-goals updates refuse n-step returns
             value, words = 1, ["1"]
         if name == "touch.goal_positions":  # given as its default: all-goals updates refuse goal positions

@@ -73,6 +73,7 @@ def test_train_config_rejects_bad_settings(kwargs, message):
         ({"precision": "x"}, "precision"),
         ({"update_every": 0}, "update_every"),
         ({"max_episode_steps": 0}, "max_episode_steps"),
+        ({"taps": 0}, "TrainConfig.taps must be at least 1, got 0"),
         ({"start_steps": -1}, "start_steps"),
         ({"frame_noise": (1.0, 2.0)}, "frame_noise randomises the live renderer's .* not 'dataset'"),
         ({"frame_noise": (1.0,), "backend": "render"}, r"frame_noise is \(mm, degrees\), both >= 0"),
@@ -93,6 +94,7 @@ def test_train_config_rejects(kwargs, message):
         ({"touch": {"epochs": 0}}, "TouchConfig.epochs must be at least 1"),
         ({"replay": {"n_step": 0}}, "ReplayConfig.n_step must be at least 1"),
         ({"touch": {"refits": -1}}, "TouchConfig.refits must be at least 0"),
+        ({"taps": 2}, "the touch encoder reads one tap at a time: taps=2 stacks several"),
     ],
 )
 def test_train_config_rejects_bad_touch_and_relabel_settings(env_datasets, changes, message):

@@ -363,7 +363,7 @@ def test_paper_mode_stores_copies_of_wrong_presses_and_all_mode_none():
         ({"relabel_final": float("nan")}, "probabilities"),
         ({"observation_shape": (10, 10)}, "images or vectors"),
         ({"observation_shape": (100, 100)}, "images or vectors"),
-        ({"observation_shape": (100, 100, 3)}, "images or vectors"),
+        ({"observation_shape": (100, 100, 0)}, "images or vectors"),
     ],
 )
 def test_replay_rejects_bad_arguments(kwargs, message):
@@ -1020,7 +1020,20 @@ def test_a_frame_store_packs_any_binary_image_shape():
     assert FrameStore(3).frames.shape == (3, PACKED_BYTES)
 
 
-@pytest.mark.parametrize("shape", [(10, 10), (100, 100), (100, 100, 3), (0, 5, 1), (5, 0, 1)])
+def test_a_frame_store_gives_back_stacked_taps_channel_by_channel():
+    store = FrameStore(4, (7, 9, 3))
+    assert store.frames.shape == (4, 24)  # 189 bits
+    rng = np.random.default_rng(1)
+    images = [((rng.random((7, 9, 3)) < 0.5) * 255).astype(np.uint8) for _ in range(3)]
+    slots = [store.store(image) for image in images]
+    shown = store.observations(np.array(slots[::-1]))
+    assert shown.shape == (3, 3, 7, 9) and shown.flags.c_contiguous
+    for image, back in zip(images[::-1], shown, strict=True):
+        for channel in range(3):
+            np.testing.assert_array_equal(back[channel], image[..., channel])
+
+
+@pytest.mark.parametrize("shape", [(10, 10), (100, 100), (100, 100, 0), (0, 5, 1), (5, 0, 1)])
 def test_a_frame_store_refuses_other_shapes(shape):
     with pytest.raises(ValueError, match="images or vectors"):
         FrameStore(3, shape)

@@ -965,3 +965,27 @@ def test_a_rig_handed_to_a_run_on_the_dataset_is_refused_before_the_folder_is_wr
     with pytest.raises(ValueError, match="backend is 'dataset': set backend='rig'"):
         train(config, run_dir=tmp_path / "run", progress=False, rig=VirtualRig())
     assert not (tmp_path / "run").exists()
+
+
+def test_a_run_with_tap_memory_replays_stacked_taps_resumes_and_is_evaluated_with_them(
+    env_datasets, tmp_path, recording
+):
+    config = TrainConfig(
+        task=CONTINUOUS_TASK, algo="sac", epochs=1, steps_per_epoch=40, start_steps=10, threads=1, taps=2,
+        dataset=str(env_datasets[CONTINUOUS_TASK]), agent=SACConfig(hidden=(64,), batch_size=8),
+        evaluation={"test_episodes": 1}, replay={"capacity": 500},
+    )  # fmt: skip
+    run = train(config, run_dir=tmp_path / "taps", progress=False)
+    run = train(config.with_changes(epochs=2), run_dir=run, resume=True, progress=False)
+    assert [row["epoch"] for row in read_progress(run)] == [0, 1]
+    buffer = recording[-1]
+    assert buffer.samples > 0 and buffer.store.image_shape == (2, 100, 100)
+    batch = buffer.sample(64, np.random.default_rng(0))
+    assert batch["images"].shape == (64, 2, 100, 100)
+    assert batch["previous_actions"].shape == (64, 3)  # one action: the move between the two taps
+    # A transition's next observation remembers the tap its observation made last.
+    np.testing.assert_array_equal(batch["next_images"][:, 0], batch["images"][:, 1])
+    _, env, agent = load_run(run)
+    assert env.observation_space["observation"].shape == (100, 100, 2)
+    assert agent.actor.trunk.encoder.layers[0].in_channels == 2
+    assert 0.0 <= evaluate_run(run, episodes=2)["test/success_rate"] <= 1.0

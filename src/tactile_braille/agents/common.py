@@ -37,8 +37,12 @@ def observation_features(observation_space: gym.spaces.Dict) -> int | None:
 
 
 def network_options(observation_space: gym.spaces.Dict, config) -> tuple[dict, dict]:
-    """Keyword options of the actor's and the critics' networks: features, and LayerNorm in critics."""
-    actor = {"features": observation_features(observation_space)}
+    """Keyword options of the actor's and the critics' networks: features (or the image's channels where
+    it stacks several taps), and LayerNorm in critics."""
+    actor: dict = {"features": observation_features(observation_space)}
+    shape = observation_space["observation"].shape
+    if len(shape) == 3 and shape[-1] > 1:
+        actor["channels"] = int(shape[-1])
     return actor, {**actor, "layer_norm": bool(getattr(config, "layer_norm", False))}
 
 

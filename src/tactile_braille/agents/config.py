@@ -409,6 +409,10 @@ class TrainConfig:
             batch (None: after ``start_steps``, the paper's; the released DQN and SACs updated from
             their first step, as ``1``: from the step the replay first holds a batch).
         max_episode_steps: episode cut (None: the registry's 25).
+        taps: tactile images in each observation: 1, the paper's (the tap just made); more stacks the
+            last ``taps`` and the ``taps - 1`` actions between them
+            (:class:`~tactile_braille.envs.memory.TapMemory`): a memory of the run's own observations,
+            so on the ``tactile`` track.
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
         frame_noise: ``(mm, degrees)``: the render backend's work frame off by an error drawn anew each
             episode, offsets within +-mm along x and y, a turn within +-degrees (domain randomisation
@@ -443,6 +447,7 @@ class TrainConfig:
     update_every: int = 1
     update_after: int | None = None
     max_episode_steps: int | None = None
+    taps: int = 1
     backend: Backend = "dataset"
     frame_noise: tuple[float, ...] | None = None
     dataset: str | None = None
@@ -476,7 +481,7 @@ class TrainConfig:
         check_types(self)
         self._check_frame_noise()
         _at_least(self, 1, "epochs", "steps_per_epoch", "update_every", "checkpoint_every", "threads",
-                  "max_episode_steps")  # fmt: skip
+                  "max_episode_steps", "taps")  # fmt: skip
         _at_least(self, 0, "seed", "start_steps", "updates_per_step", "update_after")
         self._check_task()
         self._check_device()
@@ -554,6 +559,10 @@ class TrainConfig:
                 raise ValueError(
                     f"{name} learns from a touch encoder's labelled frames: set touch.enabled too"
                 )
+        if touch.enabled and self.taps > 1:
+            raise ValueError(
+                f"the touch encoder reads one tap at a time: taps={self.taps} stacks several, set taps=1"
+            )
         if touch.labels != "robot" and not touch.enabled:
             raise ValueError(f"touch.labels={touch.labels!r} is the touch encoder's: set touch.enabled too")
         if touch.goal_positions and touch.labels == "observation" and touch.inputs != "readout":

@@ -46,6 +46,8 @@ class GoalConditionedTrunk(nn.Module):
         encoder: another network's encoder to share (detached), or None for an own one.
         features: the observation is a vector of this many features (no encoder).
         layer_norm: a LayerNorm before each dense layer's ReLU.
+        channels: channels of the image its own encoder reads (more than one: stacked taps,
+            :class:`~tactile_braille.envs.memory.TapMemory`).
     """
 
     def __init__(
@@ -55,6 +57,7 @@ class GoalConditionedTrunk(nn.Module):
         encoder: Encoder | None = None,
         features: int | None = None,
         layer_norm: bool = False,
+        channels: int = 1,
     ):
         super().__init__()
         if not hidden or min(hidden) < 1:
@@ -65,7 +68,7 @@ class GoalConditionedTrunk(nn.Module):
         if features is not None:
             self.encoder = None
         elif encoder is None:
-            self.encoder = Encoder()
+            self.encoder = Encoder(channels)
         else:
             self._shared = (encoder,)
         sizes = [(features or Encoder.output_size) + vector_size, *hidden]

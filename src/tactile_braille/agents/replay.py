@@ -83,22 +83,22 @@ class FrameStore:
 
     Args:
         capacity: frames kept (the oldest are overwritten).
-        observation_shape: ``(H, W, 1)`` for binary images, bit-packed to
-            ``ceil(H * W / 8)`` bytes (pixels above 127 are 1) and handed back as
-            (B, 1, H, W) uint8 images of 0 and 255; ``(n,)`` for float32 vectors.
+        observation_shape: ``(H, W, C)`` for binary images (C channels: 1, or stacked taps),
+            bit-packed to ``ceil(H * W * C / 8)`` bytes (pixels above 127 are 1) and handed
+            back as (B, C, H, W) uint8 images of 0 and 255; ``(n,)`` for float32 vectors.
     """
 
     def __init__(self, capacity: int, observation_shape: tuple[int, ...] = (100, 100, 1)) -> None:
         shape = tuple(observation_shape)
-        self.images = len(shape) == 3 and shape[2] == 1 and shape[0] >= 1 and shape[1] >= 1
+        self.images = len(shape) == 3 and min(shape) >= 1
         if not self.images and len(shape) != 1:
             raise ValueError(
-                f"observations must be (H, W, 1) binary images or vectors, got {observation_shape}"
+                f"observations must be (H, W, C) binary images or vectors, got {observation_shape}"
             )
         self.capacity = int(capacity)
         if self.images:
-            self.image_shape = (1, int(shape[0]), int(shape[1]))
-            self.pixels = self.image_shape[1] * self.image_shape[2]
+            self.image_shape = (int(shape[2]), int(shape[0]), int(shape[1]))
+            self.pixels = int(np.prod(shape))
             self.frames = np.zeros((self.capacity, -(-self.pixels // 8)), dtype=np.uint8)
         else:
             self.frames = np.zeros((self.capacity, shape[0]), dtype=np.float32)
@@ -125,11 +125,15 @@ class FrameStore:
         self.committed = (self.next_frame, self.frames_written)
 
     def observations(self, slots: np.ndarray) -> np.ndarray:
-        """The observations of ``slots`` (1-D): images (B, 1, H, W) uint8, or vectors (B, n)."""
+        """The observations of ``slots`` (1-D): images (B, C, H, W) uint8, or vectors (B, n)."""
         if not self.images:
             return self.frames[slots]
+        channels, height, width = self.image_shape
         bits = np.unpackbits(self.frames[slots], axis=-1, count=self.pixels)
-        return (bits.reshape(len(slots), *self.image_shape) * 255).astype(np.uint8)
+        images = bits.reshape(len(slots), height, width, channels)
+        if channels > 1:  # stored as the environment gives them, channels last
+            images = images.transpose(0, 3, 1, 2)
+        return np.ascontiguousarray(images.reshape(len(slots), *self.image_shape) * 255, dtype=np.uint8)
 
     def written_slots(self) -> np.ndarray:
         """Slots that hold a frame (committed or of the episode in progress)."""
@@ -558,7 +562,7 @@ class EpisodeReplayBuffer:
 
     # --------------------------------------------------------- reading
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """A uniform batch of transitions (images as (B, 1, H, W) uint8, or features (B, n))."""
+        """A uniform batch of transitions (images as (B, C, H, W) uint8, or features (B, n))."""
         if self.size == 0:
             raise RuntimeError("the replay buffer is empty")
         index = rng.integers(self.size, size=batch_size)

@@ -47,6 +47,7 @@ from tactile_braille.agents.sac import SACAgent
 from tactile_braille.agents.sac_discrete import DiscreteSACAgent
 from tactile_braille.agents.td3 import TD3Agent
 from tactile_braille.agents.touch import TouchAgent, feature_space, touch_input_size
+from tactile_braille.envs.memory import TapMemory
 from tactile_braille.envs.registry import task_of
 from tactile_braille.supervised.touch import TouchEncoder, TouchEncoderConfig
 
@@ -247,7 +248,8 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
             kwargs["proprio"] = True  # the proprio track's observation: with the arm's pose
     if config.max_episode_steps is not None:
         kwargs["max_episode_steps"] = config.max_episode_steps
-    return gym.make(config.task, **kwargs)
+    env = gym.make(config.task, **kwargs)
+    return TapMemory(env, config.taps) if config.taps > 1 else env
 
 
 def make_agent(config: TrainConfig, env: gym.Env):

@@ -21,6 +21,7 @@ import numpy as np
 
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.run import read_config, read_progress, run_world
+from tactile_braille.envs.memory import TapMemory
 from tactile_braille.envs.registry import task_name, task_of
 from tactile_braille.evaluation.protocol import paper_sequences
 from tactile_braille.evaluation.report import ALGO_NAMES, departures
@@ -109,6 +110,7 @@ def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
     agent = None
     for world in chosen:
         env = world.make_env(config.task, sensor, proprio=bool(config.touch.pose_inputs), **options)
+        env = TapMemory(env, config.taps) if config.taps > 1 else env
         if agent is None:  # the checkpoint once: every world has the task's spaces and layout
             _, _, agent = load_run(run_dir, env=env)
         report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=False)

@@ -40,8 +40,8 @@ def conv_output_size(image_size_px: int = IMAGE_SIZE_PX) -> int:
     return CHANNELS[-1] * side * side
 
 
-def conv_stack(batch_norm: bool = False) -> nn.Sequential:
-    """The paper's convolutions on one-channel images, then a Flatten.
+def conv_stack(batch_norm: bool = False, channels: int = 1) -> nn.Sequential:
+    """The paper's convolutions on images of ``channels`` channels (one: the paper's), then a Flatten.
 
     Conv, ReLU (and, with ``batch_norm``, a BatchNorm) for each of the three
     layers, in that order: a ``Sequential`` whose indices (``0``, ``2``, ...)
@@ -50,12 +50,12 @@ def conv_stack(batch_norm: bool = False) -> nn.Sequential:
     :func:`he_init` for the paper's.
     """
     layers: list[nn.Module] = []
-    inputs = 1
-    for channels, kernel, stride in zip(CHANNELS, KERNELS, STRIDES, strict=True):
-        layers += [nn.Conv2d(inputs, channels, kernel, stride=stride), nn.ReLU()]
+    inputs = channels
+    for outputs, kernel, stride in zip(CHANNELS, KERNELS, STRIDES, strict=True):
+        layers += [nn.Conv2d(inputs, outputs, kernel, stride=stride), nn.ReLU()]
         if batch_norm:
-            layers.append(nn.BatchNorm2d(channels))
-        inputs = channels
+            layers.append(nn.BatchNorm2d(outputs))
+        inputs = outputs
     layers.append(nn.Flatten())
     return nn.Sequential(*layers)
 
@@ -76,9 +76,9 @@ class Encoder(nn.Module):
 
     output_size = conv_output_size()
 
-    def __init__(self) -> None:
+    def __init__(self, channels: int = 1) -> None:
         super().__init__()
-        self.layers = conv_stack()
+        self.layers = conv_stack(channels=channels)
         self.apply(he_init)
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
