@@ -22,6 +22,7 @@ import sys
 import time
 from typing import ClassVar, NamedTuple
 
+import gymnasium
 import numpy as np
 import pytest
 import torch
@@ -49,11 +50,12 @@ from tactile_braille.agents import (
     train,
 )
 from tactile_braille.agents.common import POSE_SIZE
-from tactile_braille.agents.extensions import touch_fit_steps
+from tactile_braille.agents.extensions import RunExtension, touch_fit_steps
 from tactile_braille.agents.replay import FRAME_LABELS, PACKED_BYTES
 from tactile_braille.agents.report import evaluate_run, load_run
 from tactile_braille.agents.run import setting_differences
 from tactile_braille.agents.touch import TouchAgent
+from tactile_braille.agents.training import Episodes, make_env, make_replay
 from tactile_braille.evaluation.protocol import paper_sequences
 from tactile_braille.evaluation.results import read_result
 from tactile_braille.evaluation.runs import (
@@ -989,3 +991,54 @@ def test_a_run_with_tap_memory_replays_stacked_taps_resumes_and_is_evaluated_wit
     assert env.observation_space["observation"].shape == (100, 100, 2)
     assert agent.actor.trunk.encoder.layers[0].in_channels == 2
     assert 0.0 <= evaluate_run(run, episodes=2)["test/success_rate"] <= 1.0
+
+
+class PoseLog(gymnasium.Wrapper):
+    """Where each episode starts and where each step leaves the sensor (``info``'s pose)."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.starts, self.ends = [], []
+
+    def reset(self, **kwargs):
+        observation, info = self.env.reset(**kwargs)
+        self.starts.append(np.array(info["sensor_pose_mm"]))
+        self.ends.append(self.starts[-1])
+        return observation, info
+
+    def step(self, action):
+        result = self.env.step(action)
+        self.ends[-1] = np.array(result[-1]["sensor_pose_mm"])
+        return result
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.5, 1.0])
+def test_episodes_start_where_the_last_one_left_the_sensor_at_the_kept_share(env_datasets, fraction):
+    config = TrainConfig(dataset=str(env_datasets[DISCRETE_TASK]), threads=1, keep_pose_fraction=fraction)
+    env = PoseLog(make_env(config))
+    episodes = Episodes(env, make_replay(config, env), RunExtension(), np.random.default_rng(0), fraction)
+    rng = np.random.default_rng(1)
+    for _ in range(400):
+        episodes.step(int(rng.integers(env.action_space.n)))
+    # Kept: the sensor's x and y where the last episode ended (the new tap is light where a press was deep).
+    kept = [np.allclose(start[:2], end[:2]) for start, end in zip(env.starts[1:], env.ends[:-1], strict=True)]
+    assert len(kept) > 40 and episodes.kept_starts <= sum(kept)
+    if fraction == 0.0:
+        assert episodes.kept_starts == 0 and sum(kept) < len(kept) / 4  # random starts, a few on the spot
+    elif fraction == 1.0:
+        assert episodes.kept_starts == len(kept) and all(kept)
+    else:
+        assert 0.3 < episodes.kept_starts / len(kept) < 0.7
+
+
+def test_a_run_that_keeps_poses_trains_resumes_and_names_the_setting(env_datasets, tmp_path):
+    config = TrainConfig(
+        dataset=str(env_datasets[DISCRETE_TASK]), epochs=1, steps_per_epoch=40, start_steps=10, threads=1,
+        keep_pose_fraction=0.5, agent=DQNConfig(hidden=HIDDEN, batch_size=8), evaluation={"test_episodes": 1},
+    )  # fmt: skip
+    run = train(config, run_dir=tmp_path / "kept", progress=False)
+    run = train(config.with_changes(epochs=2), run_dir=run, resume=True, progress=False)
+    assert [row["epoch"] for row in read_progress(run)] == [0, 1]
+    assert json.loads((run / "config.json").read_text())["keep_pose_fraction"] == 0.5
+    with pytest.raises(ValueError, match="keep_pose_fraction"):
+        train(config.with_changes(epochs=3, keep_pose_fraction=0.0), run_dir=run, resume=True, progress=False)

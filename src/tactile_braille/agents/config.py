@@ -413,6 +413,10 @@ class TrainConfig:
             last ``taps`` and the ``taps - 1`` actions between them
             (:class:`~tactile_braille.envs.memory.TapMemory`): a memory of the run's own observations,
             so on the ``tactile`` track.
+        keep_pose_fraction: the share of training episodes that start where the last one left the
+            sensor, as the paper's typing evaluation starts each key of a sequence (drawn per
+            episode; 0: every episode from a random start pose, the paper's training). Where
+            episodes start is the training's schedule, not an input, so on the ``tactile`` track.
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
         frame_noise: ``(mm, degrees)``: the render backend's work frame off by an error drawn anew each
             episode, offsets within +-mm along x and y, a turn within +-degrees (domain randomisation
@@ -448,6 +452,7 @@ class TrainConfig:
     update_after: int | None = None
     max_episode_steps: int | None = None
     taps: int = 1
+    keep_pose_fraction: float = 0.0
     backend: Backend = "dataset"
     frame_noise: tuple[float, ...] | None = None
     dataset: str | None = None
@@ -483,6 +488,10 @@ class TrainConfig:
         _at_least(self, 1, "epochs", "steps_per_epoch", "update_every", "checkpoint_every", "threads",
                   "max_episode_steps", "taps")  # fmt: skip
         _at_least(self, 0, "seed", "start_steps", "updates_per_step", "update_after")
+        if not 0.0 <= self.keep_pose_fraction <= 1.0:
+            raise ValueError(
+                f"keep_pose_fraction is a share of episodes, in [0, 1], got {self.keep_pose_fraction}"
+            )
         self._check_task()
         self._check_device()
         self._check_touch()
@@ -532,6 +541,11 @@ class TrainConfig:
         if task is not None and task.continuous != (self.algo in CONTINUOUS_ALGORITHMS):
             kind = "continuous" if self.algo in CONTINUOUS_ALGORITHMS else "discrete"
             raise ValueError(f"{self.algo} needs a {kind} task, got {self.task}")
+        if self.keep_pose_fraction > 0 and task is None:
+            raise ValueError(
+                f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "
+                f"option keep_pose), got {self.task}"
+            )
         if self.touch.labels == "observation" and task is None:
             raise ValueError(
                 f"touch.labels='observation' reads the braille tasks' documented actions, got {self.task}"

@@ -109,7 +109,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
         warm_start(run_dir, config, agent)
     write_config(run_dir, config)  # a resume's new epochs or machine, once its world and checkpoint are read
     extension = make_extension(config, env, agent, buffer, run_dir)
-    episodes = Episodes(env, buffer, extension, rng)
+    episodes = Episodes(env, buffer, extension, rng, config.keep_pose_fraction)
     burst, batch_size = config.update_every * config.updates_per_step, config.agent.batch_size
     losses: dict[str, float] = {}
     with EpochLog(
@@ -197,17 +197,32 @@ class Episodes:
     """The training environment's episodes as they are collected into the replay.
 
     :meth:`step` acts, stores the transition (with the extension's labels of
-    its frame) and starts the next episode when one ends; the start poses are
-    drawn from the run's generator.
+    its frame) and starts the next episode when one ends; goals and start poses
+    are drawn from the run's generator. With ``keep_pose_fraction`` that share
+    of the episodes after the first starts where the last one left the sensor
+    (``reset(options={"keep_pose": True})``, as between the keys the paper's
+    typing evaluation asks in a row).
     """
 
-    def __init__(self, env: gym.Env, buffer: EpisodeReplayBuffer, extension: RunExtension, rng) -> None:
+    def __init__(
+        self,
+        env: gym.Env,
+        buffer: EpisodeReplayBuffer,
+        extension: RunExtension,
+        rng,
+        keep_pose_fraction: float = 0.0,
+    ) -> None:
         self.env, self.buffer, self.extension, self.rng = env, buffer, extension, rng
+        self.keep_pose_fraction = keep_pose_fraction
         self.returns: list[float] = []
-        self._start()
+        self.kept_starts = 0
+        self._start(first=True)
 
-    def _start(self) -> None:
-        self.observation, info = self.env.reset(seed=int(self.rng.integers(2**31)))
+    def _start(self, first: bool = False) -> None:
+        seed = int(self.rng.integers(2**31))
+        keep = not first and self.keep_pose_fraction > 0 and self.rng.random() < self.keep_pose_fraction
+        self.kept_starts += keep
+        self.observation, info = self.env.reset(seed=seed, options={"keep_pose": True} if keep else None)
         self.buffer.start_episode(self.observation, self.extension.label(self.observation, info))
         self.episode_return = 0.0
 
