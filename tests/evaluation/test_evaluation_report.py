@@ -16,6 +16,7 @@ from tactile_braille.evaluation.report import (
     _reached_cell,
     bootstrap_ci,
     compared_groups,
+    coverage_table,
     grid_label,
     group,
     iqm,
@@ -93,6 +94,37 @@ def test_results_table_has_the_papers_shape_and_numbers():
         group([*records, record("DiscreteArrows-v0", "dqn", 0, [0.5])])
     assert table[4].endswith("| 1722 | 0.981 | 45 |")
     assert "| 1800 (one run) | 1309 | 0.900 (one run) | 1900 (one run) | 1433 | 0.800 (one run) |" in table[4]
+
+
+def test_coverage_counts_only_full_runs_of_a_presets_own_settings():
+    task = "tactile_braille/DiscreteAlphabet-v0"
+    paper = preset_config("paper", task, "dqn", precision="bf16")
+    released = preset_config("released", task, "dqn", precision="bf16")
+    earlier = replace_settings(released, {"agent": {"dueling_split": False}})  # an earlier released preset
+    records = []
+    for seed in range(5):  # paper: five seeds of 100 epochs
+        records.append(record("DiscreteAlphabet-v0", "dqn", seed, [0.5] * 100))
+        records[-1].config = paper
+    for seed, epochs in ((0, 100), (1, 100), (2, 54)):  # released: two full runs and one stopped early
+        records.append(record("DiscreteAlphabet-v0", "dqn", seed, [0.5] * epochs))
+        records[-1].config = released
+    for seed in range(5):  # five full runs that depart from today's released preset
+        records.append(record("DiscreteAlphabet-v0", "dqn", seed, [0.5] * 100))
+        records[-1].config = earlier
+    records.append(record("ContinuousAlphabet-v0", "sac", 0, [0.1] * 120))
+    records[-1].config = preset_config("paper", "tactile_braille/ContinuousAlphabet-v0", "sac")
+    rows = {
+        tuple(cell.strip() for cell in line.strip("|").split("|")[:2]): line
+        for line in coverage_table(group(records)).splitlines()[2:]
+    }
+    assert len(rows) == 16  # the eight simulated rows of Table III, each with both presets
+    assert rows["disc alpha, DQN", "paper"].endswith("| tactile | 5 | 100 | 5 x 100 | complete |")
+    assert rows["disc alpha, DQN", "released"].endswith(
+        "| tactile | 2 | 100 | 5 x 100 | 3 more seeds; 1 stopped at epoch 54 |"
+    )
+    # The continuous alphabet is asked as far as compute allows: 3 seeds of 100 epochs or more.
+    assert rows["cont alpha, SAC", "paper"].endswith("| 1 | 120 | 3 x 100 (of 2,000) | 2 more seeds |")
+    assert rows["disc arrow, SAC_DISC", "released"].endswith("| 0 | - | 5 x 25 | not run |")
 
 
 def test_runs_of_two_tracks_are_tabled_apart_under_their_tracks():
