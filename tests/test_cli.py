@@ -139,3 +139,14 @@ def test_benchmark_runs_each_preset_in_its_own_folders_and_refuses_unknown_rows(
     assert main(["benchmark", "--paper", "--tasks", "DiscreteArrows-v0", "--algos", "td3"]) == 2
     assert "Table III has no row of ['td3'] on ['DiscreteArrows-v0']" in capsys.readouterr().err
     assert len(calls) == 2  # nothing ran for the refused ones
+
+
+def test_a_reports_command_names_a_folder_whose_every_entry_it_reports_as_folder_star(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for run in ("results/a/x", "results/a/y", "results/b/x", "results/b/y", "results/b/z"):
+        (tmp_path / run).mkdir(parents=True)
+    argv = ["report", "results/a/x", "results/a/y", "results/b/x", "results/b/y", "--output", "my file.md"]
+    # Every entry of results/a is named; results/b/z is not, so results/b's runs stay listed one by one.
+    assert cli._short_command(argv) == "report results/a/* results/b/x results/b/y --output 'my file.md'"
+    (tmp_path / "results/a/notes.txt").write_text("not a run")  # a/* would now also name this file
+    assert cli._short_command(argv[:3]) == "report results/a/x results/a/y"

@@ -383,7 +383,7 @@ def _report(args: argparse.Namespace) -> int:
         from tactile_braille.evaluation.report import write_report as write_results
 
         notes = args.notes.read_text() if args.notes is not None else None
-        command = "tactile-braille " + shlex.join(args.argv) if args.argv else None
+        command = "tactile-braille " + _short_command(args.argv) if args.argv else None
         results = write_results(
             args.runs,
             args.output,
@@ -902,6 +902,26 @@ def build_parser() -> argparse.ArgumentParser:
     _add_keycaps_command(commands)
     _add_rig_command(commands)
     return parser
+
+
+def _short_command(argv: Sequence[str]) -> str:
+    """``argv`` joined for a shell, each run of folders that are all the entries of one parent folder
+    written ``parent/*`` (the same command, as a reader can take it in)."""
+    words: list[str] = []
+    index = 0
+    while index < len(argv):
+        parent = Path(argv[index]).parent
+        end = index
+        while end < len(argv) and Path(argv[end]).parent == parent and Path(argv[end]).is_dir():
+            end += 1
+        named = {Path(word) for word in argv[index:end]}
+        if end - index > 1 and str(parent) != "." and set(parent.iterdir()) == named:
+            words.append(shlex.quote(str(parent)) + "/*")
+            index = end
+        else:
+            words.append(shlex.quote(argv[index]))
+            index += 1
+    return " ".join(words)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
