@@ -575,6 +575,23 @@ def test_discrete_sac_builds_the_released_codes_plain_critics_and_initial_weight
     assert all(np.isfinite(value) for value in losses.values())
 
 
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_continuous_agents_build_the_released_codes_networks_where_asked(algo, tasks):
+    """The released SAC's and TD3's networks: their initial weights, actions read in mm, and SAC's
+    log deviation through a tanh; every network of the agent (targets too) takes them."""
+    extra = {"log_std": "tanh"} if algo == "sac" else {}
+    agent = build(algo, tasks, weights_init="released", action_input_scale=10.0, **extra)
+    targets = agent.targets if algo == "sac" else [*agent.critic_targets, agent.actor_target]
+    for network in (*agent.critics, agent.actor, *targets):
+        assert network.action_scale == 10.0
+    assert torch.all(agent.critics[0].q.bias == 0) and agent.critics[0].q.weight.std() > 0.05  # Glorot
+    if algo == "sac":
+        assert agent.actor.log_std_rule == "tanh" and build(algo, tasks).actor.log_std_rule == "clamp"
+    assert build(algo, tasks).critics[0].action_scale == 1.0  # ours: actions in [-1, 1]
+    losses = agent.update(make_batch(algo, tasks))
+    assert all(np.isfinite(value) for value in losses.values())
+
+
 def test_an_inverse_dynamics_loss_trains_the_q_networks_encoder_to_tell_the_action(tasks):
     """The auxiliary head guesses each transition's action from the encoder's features of its two frames;
     its loss is the cross-entropy of that guess and reaches the encoder, not the TD loss's value."""

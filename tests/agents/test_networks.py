@@ -14,8 +14,10 @@ from tactile_braille.agents.common import POSE_SIZE
 from tactile_braille.agents.networks import (
     LOG_STD_MAX,
     LOG_STD_MIN,
+    RELEASED_LOG_STD_MIN,
     TRUNCATED_NORMAL_STD,
     ContinuousQNetwork,
+    DeterministicPolicy,
     DuelingQNetwork,
     GaussianPolicy,
     PolicyNetwork,
@@ -159,3 +161,64 @@ def test_the_policy_network_takes_the_released_initial_weights_where_asked():
     assert PolicyNetwork(ACTIONS, GOALS, PREVIOUS).logits.weight.std() < 0.02 < policy.logits.weight.std()
     with pytest.raises(ValueError, match="weights_init must be 'he' or 'released', got 'xavier'"):
         PolicyNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="xavier")
+
+
+@pytest.mark.parametrize("network", [ContinuousQNetwork, GaussianPolicy, DeterministicPolicy])
+def test_released_continuous_networks_take_lecun_layers_and_glorot_heads(network):
+    """The released SAC's and TD3's networks: TensorFlow's variance scaling for the convolutions and
+    dense layers, its dense default (Glorot uniform, zero biases) for the output layers."""
+    torch.manual_seed(0)
+    net = network(ACTIONS, GOALS, PREVIOUS, hidden=(64,), weights_init="released")
+    heads = [m for name, m in net.named_children() if isinstance(m, nn.Linear)]
+    assert released_layers(net.trunk) == 3 + 1  # the paper's convolutions and the dense layer
+    for head in heads:
+        glorot = (6.0 / (head.in_features + head.out_features)) ** 0.5
+        assert torch.all(head.bias == 0) and head.weight.abs().max() <= glorot
+        assert head.weight.abs().max() > 0.8 * glorot  # uniform up to the bound, not near zero as ours
+    ours = network(ACTIONS, GOALS, PREVIOUS, hidden=(64,))
+    assert all(head.weight.std() < 0.02 for head in ours.children() if isinstance(head, nn.Linear))
+    with pytest.raises(ValueError, match="weights_init must be 'he' or 'released', got 'glorot'"):
+        network(ACTIONS, GOALS, PREVIOUS, weights_init="glorot")
+
+
+def test_actions_join_the_networks_scaled_as_the_released_code_reads_them_in_mm():
+    """``action_scale`` s: a network fed actions a behaves as the unscaled one fed s * a (same weights)."""
+    torch.manual_seed(0)
+    size, scale = 8, 10.0
+    images = ((torch.rand(size, 1, 100, 100) < 0.3) * 255).to(torch.uint8)
+    goals = torch.eye(GOALS)[torch.randint(GOALS, (size,))]
+    previous, actions = torch.rand(size, ACTIONS) * 2 - 1, torch.rand(size, ACTIONS) * 2 - 1
+    critic = ContinuousQNetwork(ACTIONS, GOALS, PREVIOUS, hidden=(32,), action_scale=scale)
+    plain = ContinuousQNetwork(ACTIONS, GOALS, PREVIOUS, hidden=(32,))
+    plain.load_state_dict(critic.state_dict())
+    with torch.no_grad():
+        scaled_q = critic(images, goals, previous, actions)
+        torch.testing.assert_close(scaled_q, plain(images, goals, scale * previous, scale * actions))
+        assert not torch.allclose(scaled_q, plain(images, goals, previous, actions))
+        actor = DeterministicPolicy(ACTIONS, GOALS, PREVIOUS, hidden=(32,), action_scale=scale)
+        plain_actor = DeterministicPolicy(ACTIONS, GOALS, PREVIOUS, hidden=(32,))
+        plain_actor.load_state_dict(actor.state_dict())
+        torch.testing.assert_close(
+            actor(images, goals, previous), plain_actor(images, goals, scale * previous)
+        )
+    with pytest.raises(ValueError, match="action_scale must be positive, got 0"):
+        GaussianPolicy(ACTIONS, GOALS, PREVIOUS, action_scale=0)
+
+
+def test_the_released_log_deviation_runs_through_a_tanh_onto_its_bounds():
+    hidden = torch.randn(16, 32)
+    policy = GaussianPolicy(ACTIONS, GOALS, PREVIOUS, hidden=(32,), log_std="tanh", features=FEATURES)
+    ours = GaussianPolicy(ACTIONS, GOALS, PREVIOUS, hidden=(32,), features=FEATURES)
+    with torch.no_grad():
+        for bias, released, clamped in ((0.0, -9.0, 0.0), (50.0, LOG_STD_MAX, LOG_STD_MAX),
+                                        (-50.0, RELEASED_LOG_STD_MIN, LOG_STD_MIN)):  # fmt: skip
+            for net in (policy, ours):
+                net.log_std.weight.zero_()
+                net.log_std.bias.fill_(bias)
+            assert torch.all(policy.log_deviation(hidden) == released)
+            assert torch.all(ours.log_deviation(hidden) == clamped)
+        policy.log_std.bias.fill_(0.5)  # between the bounds: the tanh's curve, not a clamp
+        expected = RELEASED_LOG_STD_MIN + 0.5 * (LOG_STD_MAX - RELEASED_LOG_STD_MIN) * (np.tanh(0.5) + 1)
+        torch.testing.assert_close(policy.log_deviation(hidden), torch.full((16, ACTIONS), float(expected)))
+    with pytest.raises(ValueError, match="log_std must be one of"):
+        GaussianPolicy(ACTIONS, GOALS, PREVIOUS, log_std="softplus")

@@ -9,6 +9,7 @@ from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK
 from tactile_braille.agents import preset_config
 from tactile_braille.agents.config import flatten
 from tactile_braille.agents.presets import preset_differences
+from tactile_braille.envs.registry import task_of
 from tactile_braille.sweep import PAPER_SIM_RUNS
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -62,9 +63,14 @@ RELEASED = {
         "agent.initial_alpha": (1.0, pytest.approx(np.exp(0.1 * np.log(5)))), "update_after": (None, 1),
         "agent.dueling": (True, False), "agent.weights_init": ("he", "released"),
     },
-    "sac": {"agent.hidden": ([512], [1024, 512]), "max_episode_steps": (25, 35), "update_after": (None, 1)},
+    "sac": {
+        "agent.hidden": ([512], [1024, 512]), "max_episode_steps": (25, 35), "update_after": (None, 1),
+        "agent.weights_init": ("he", "released"), "agent.log_std": ("clamp", "tanh"),
+        "agent.action_input_scale": (1.0, "largest move"),  # the task's, in mm
+    },
     "td3": {
         "agent.learning_rate": (5e-5, 7.5e-5), "update_every": (1, 100), "agent.schedule_interval": (1, 250),
+        "agent.weights_init": ("he", "released"), "agent.action_input_scale": (1.0, "largest move"),
     },
 }  # fmt: skip
 """What the released code's configurations change from the paper's (dotted setting -> (paper, released))."""
@@ -80,6 +86,8 @@ def test_released_preset_differs_exactly_by_the_listed_settings(task, algo):
     changed = {key for key in paper if paper[key] != released[key]}
     assert changed == set(RELEASED[algo])
     for key, (paper_value, released_value) in RELEASED[algo].items():
+        if released_value == "largest move":  # the released code's networks read actions in mm
+            released_value = task_of(task).max_move_mm
         assert (paper[key], released[key]) == (paper_value, released_value), key
     assert len(preset_differences("released", task, algo)) == len(RELEASED[algo])
 
@@ -89,6 +97,9 @@ def test_released_preset_values():
     assert (td3.agent.learning_rate, td3.update_every) == (7.5e-5, 100)
     sac = preset_config("released", CONTINUOUS_TASK, "sac")
     assert (sac.agent.hidden, sac.max_episode_steps) == ((1024, 512), 35)
+    # Its networks read actions in mm: the scale is the task's largest move (20 mm on the alphabet).
+    alphabet = preset_config("released", "tactile_braille/ContinuousAlphabet-v0", "td3")
+    assert alphabet.agent.action_input_scale == 20.0
     dqn = preset_config("released", DISCRETE_TASK, "dqn").agent
     assert (dqn.test_epsilon, dqn.target_update, dqn.tau, dqn.loss, dqn.adam_eps) == (
         0.05,

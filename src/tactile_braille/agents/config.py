@@ -43,6 +43,7 @@ TargetUpdate = Literal["update", "epoch"]
 QLoss = Literal["mse", "huber"]
 GoalWeights = Literal["uniform", "relabel"]
 WeightsInit = Literal["he", "released"]
+LogStdRule = Literal["clamp", "tanh"]
 Track = Literal["tactile", "proprio"]
 
 PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
@@ -68,7 +69,7 @@ def _check_hyperparameters(config) -> None:
         problems.append(f"tau must be in (0, 1], got {config.tau}")
     if getattr(config, "inverse_dynamics", 0.0) < 0:
         problems.append(f"inverse_dynamics is a loss weight: at least 0, got {config.inverse_dynamics}")
-    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps"):
+    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps", "action_input_scale"):
         if getattr(config, name, 1.0) <= 0:
             problems.append(f"{name} must be positive, got {getattr(config, name)}")
     hidden = getattr(config, "hidden", (1,))
@@ -177,6 +178,14 @@ class SACConfig:
             (not the paper's setting; as in SAC-AE and DrQ).
         critic_pose: asymmetric critics that also see the sensor pose (batches then carry
             ``poses`` and ``next_poses``); the actor still acts on touch alone.
+        weights_init: ``"he"`` (ours: He-normal layers, heads near zero) or ``"released"`` (the
+            released code's: variance scaling 1.0 over the fan-in for the encoder and dense layers,
+            Glorot-uniform heads).
+        log_std: the policy's log deviation ``"clamp"``-ed to [-5, 2] (ours) or mapped by a
+            ``"tanh"`` onto [-20, 2] (the released code's).
+        action_input_scale: actions (the previous one, and the one a critic values) are multiplied
+            by this before they join the networks: 1 (ours, [-1, 1]) or the task's largest move in
+            mm (the released code's networks read actions in mm).
     """
 
     gamma: float = 0.95
@@ -191,6 +200,9 @@ class SACConfig:
     layer_norm: bool = False
     shared_encoder: bool = False
     critic_pose: bool = False
+    weights_init: WeightsInit = "he"
+    log_std: LogStdRule = "clamp"
+    action_input_scale: float = 1.0
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
@@ -271,6 +283,8 @@ class TD3Config:
         layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
         shared_encoder: the actor reuses the first critic's encoder, detached (not the paper's).
         critic_pose: asymmetric critics that also see the sensor pose (as SAC's).
+        weights_init: the networks' initial weights, as :class:`SACConfig`'s.
+        action_input_scale: the scale of actions inside the networks, as :class:`SACConfig`'s.
     """
 
     gamma: float = 0.95
@@ -290,6 +304,8 @@ class TD3Config:
     layer_norm: bool = False
     shared_encoder: bool = False
     critic_pose: bool = False
+    weights_init: WeightsInit = "he"
+    action_input_scale: float = 1.0
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)

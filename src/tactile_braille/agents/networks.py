@@ -35,6 +35,9 @@ from torch.nn import functional as F
 from tactile_braille.supervised.networks import Encoder, he_init
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+RELEASED_LOG_STD_MIN = -20.0
+"""The released SAC's lower bound of the log deviation, reached through a tanh (``log_std="tanh"``)."""
+LOG_STD_RULES = ("clamp", "tanh")
 
 
 class GoalConditionedTrunk(nn.Module):
@@ -143,6 +146,28 @@ def check_weights_init(weights_init: str) -> None:
     """Refuse an initialisation other than ``"he"`` (ours) and ``"released"``."""
     if weights_init not in ("he", "released"):
         raise ValueError(f"weights_init must be 'he' or 'released', got {weights_init!r}")
+
+
+def released_head_init(head: nn.Linear) -> None:
+    """The released code's initial weights for an output layer of its continuous agents (TensorFlow's
+    dense default): Glorot-uniform weights, zero biases."""
+    nn.init.xavier_uniform_(head.weight)
+    nn.init.zeros_(head.bias)
+
+
+def _released_continuous(trunk: nn.Module, heads: Sequence[nn.Linear], weights_init: str) -> None:
+    """Give a continuous agent's network the released code's initial weights where asked: variance
+    scaling for the encoder and dense layers, Glorot for the heads (else leave ours)."""
+    check_weights_init(weights_init)
+    if weights_init == "released":
+        trunk.apply(released_init)
+        for head in heads:
+            released_head_init(head)
+
+
+def _check_action_scale(action_scale: float) -> None:
+    if not action_scale > 0:
+        raise ValueError(f"action_scale must be positive, got {action_scale}")
 
 
 def _goal_row(every: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
@@ -294,7 +319,10 @@ class ContinuousQNetwork(nn.Module):
     """Q(s, g, a) of a continuous action: the action joins the goal after the encoder.
 
     ``pose_size`` > 0 makes it an *asymmetric* critic: it also takes a privileged
-    state vector (the sensor pose), which the actor never sees.
+    state vector (the sensor pose), which the actor never sees. ``action_scale``
+    multiplies the actions (previous and valued) before they join: the released
+    code's networks read them in mm, ours in [-1, 1] (scale 1). ``weights_init``:
+    ``"released"`` gives every layer variance scaling and the head Glorot weights.
     """
 
     def __init__(
@@ -305,15 +333,19 @@ class ContinuousQNetwork(nn.Module):
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
         pose_size: int = 0,
+        weights_init: str = "he",
+        action_scale: float = 1.0,
         **options,
     ) -> None:
         super().__init__()
         if pose_size < 0:
             raise ValueError(f"pose_size must be at least 0, got {pose_size}")
+        _check_action_scale(action_scale)
         vector_size = goal_size + previous_action_size + action_size + pose_size
         self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
         self.q = _small_head(self.trunk.features, 1)
-        self.pose_size = pose_size
+        self.pose_size, self.action_scale = pose_size, action_scale
+        _released_continuous(self.trunk, [self.q], weights_init)
 
     def forward(self, images, goals, previous_actions, actions, poses=None) -> torch.Tensor:
         """Q-values, shape (B,); ``poses`` (B, pose_size) for an asymmetric critic, else None."""
@@ -321,6 +353,7 @@ class ContinuousQNetwork(nn.Module):
             raise ValueError(f"this asymmetric critic needs poses of size {self.pose_size}, got none")
         if poses is not None and not self.pose_size:
             raise ValueError("this critic takes no poses (pose_size=0), but was given some")
+        previous_actions, actions = previous_actions * self.action_scale, actions * self.action_scale
         vectors = (
             (goals, previous_actions, actions) if poses is None else (goals, previous_actions, actions, poses)
         )
@@ -328,7 +361,13 @@ class ContinuousQNetwork(nn.Module):
 
 
 class GaussianPolicy(nn.Module):
-    """SAC's tanh-squashed Gaussian policy over actions in [-1, 1]."""
+    """SAC's tanh-squashed Gaussian policy over actions in [-1, 1].
+
+    ``log_std``: ``"clamp"`` (ours) clips the log deviation to [-5, 2]; ``"tanh"`` (the
+    released code's) maps it through a tanh onto [-20, 2], which starts it near -9.
+    ``action_scale`` and ``weights_init`` as :class:`ContinuousQNetwork`'s (the
+    previous action is scaled; the policy's own actions stay in [-1, 1]).
+    """
 
     def __init__(
         self,
@@ -337,18 +376,25 @@ class GaussianPolicy(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        weights_init: str = "he",
+        log_std: str = "clamp",
+        action_scale: float = 1.0,
         **options,
     ) -> None:
         super().__init__()
+        if log_std not in LOG_STD_RULES:
+            raise ValueError(f"log_std must be one of {LOG_STD_RULES}, got {log_std!r}")
+        _check_action_scale(action_scale)
         self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
         self.mean = _small_head(self.trunk.features, action_size)
         self.log_std = _small_head(self.trunk.features, action_size)
+        self.log_std_rule, self.action_scale = log_std, action_scale
+        _released_continuous(self.trunk, [self.mean, self.log_std], weights_init)
 
     def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """A reparameterised sample, its log-probability (B,), and the deterministic action."""
-        hidden = self.trunk(images, goals, previous_actions)
-        mean = self.mean(hidden).float()
-        log_std = self.log_std(hidden).float().clamp(LOG_STD_MIN, LOG_STD_MAX)
+        hidden = self.trunk(images, goals, previous_actions * self.action_scale)
+        mean, log_std = self.mean(hidden).float(), self.log_deviation(hidden)
         std = log_std.exp()
         noise = torch.randn_like(mean)
         raw = mean + std * noise
@@ -359,9 +405,18 @@ class GaussianPolicy(nn.Module):
         log_prob = log_prob - (2 * (math.log(2) - raw - F.softplus(-2 * raw))).sum(-1)
         return action, log_prob, torch.tanh(mean)
 
+    def log_deviation(self, hidden: torch.Tensor) -> torch.Tensor:
+        """The log deviation of each action's Gaussian, from the dense layers' output, within bounds."""
+        raw = self.log_std(hidden).float()
+        if self.log_std_rule == "tanh":
+            low = RELEASED_LOG_STD_MIN
+            return low + 0.5 * (LOG_STD_MAX - low) * (torch.tanh(raw) + 1)
+        return raw.clamp(LOG_STD_MIN, LOG_STD_MAX)
+
 
 class DeterministicPolicy(nn.Module):
-    """TD3's deterministic policy: ``tanh`` of a linear head, actions in [-1, 1]."""
+    """TD3's deterministic policy: ``tanh`` of a linear head, actions in [-1, 1]. ``action_scale``
+    and ``weights_init`` as :class:`ContinuousQNetwork`'s."""
 
     def __init__(
         self,
@@ -370,14 +425,20 @@ class DeterministicPolicy(nn.Module):
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
         encoder: Encoder | None = None,
+        weights_init: str = "he",
+        action_scale: float = 1.0,
         **options,
     ) -> None:
         super().__init__()
+        _check_action_scale(action_scale)
         self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
         self.action = _small_head(self.trunk.features, action_size)
+        self.action_scale = action_scale
+        _released_continuous(self.trunk, [self.action], weights_init)
 
     def forward(self, images, goals, previous_actions) -> torch.Tensor:
-        return torch.tanh(self.action(self.trunk(images, goals, previous_actions)).float())
+        hidden = self.trunk(images, goals, previous_actions * self.action_scale)
+        return torch.tanh(self.action(hidden).float())
 
 
 def observation_tensors(observation: dict[str, np.ndarray], device: torch.device) -> tuple[torch.Tensor, ...]:

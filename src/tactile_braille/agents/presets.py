@@ -96,8 +96,18 @@ RELEASED_CHANGES: dict[str, dict[str, Any]] = {
         "agent": {"initial_alpha": 5**0.1, "dueling": False, "weights_init": "released"},
         "update_after": 1,
     },
-    "sac": {"agent": {"hidden": (1024, 512)}, "max_episode_steps": 35, "update_after": 1},
-    "td3": {"agent": {"learning_rate": 7.5e-5, "schedule_interval": 250}, "update_every": 100},
+    # Since session 19 both continuous agents also start from the release's initial weights (Glorot
+    # heads), and SAC's log deviation runs through a tanh onto [-20, 2]; their networks read actions in
+    # mm (:func:`released_changes` sets the scale, the task's largest move).
+    "sac": {
+        "agent": {"hidden": (1024, 512), "weights_init": "released", "log_std": "tanh"},
+        "max_episode_steps": 35,
+        "update_after": 1,
+    },
+    "td3": {
+        "agent": {"learning_rate": 7.5e-5, "schedule_interval": 250, "weights_init": "released"},
+        "update_every": 100,
+    },
 }
 """What the released code changes from the paper's Table II, per algorithm (docs/agents.md tables each
 difference, and those not reproduced)."""
@@ -114,6 +124,16 @@ def paper_changes(task: str, algo: str) -> dict[str, Any]:
     if algo == "td3":
         scale = task_of(task).max_move_mm
         changes["agent"] = {name: mm / scale for name, mm in TD3_NOISE_MM.items()}
+    return changes
+
+
+def released_changes(task: str, algo: str) -> dict[str, Any]:
+    """:data:`RELEASED_CHANGES` for ``algo``, and for the continuous agents the scale of actions inside
+    their networks: the released code's read them in mm, ours in units of the task's largest move."""
+    changes = RELEASED_CHANGES[algo]
+    if algo in ("sac", "td3"):
+        agent = {**changes["agent"], "action_input_scale": task_of(task).max_move_mm}
+        changes = {**changes, "agent": agent}
     return changes
 
 
@@ -192,7 +212,7 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
         TrainConfig(task=task, algo=algo, preset=name, track=PRESET_TRACKS[name]), changes
     )
     if name == "released":
-        config = replace_settings(config, RELEASED_CHANGES[algo])
+        config = replace_settings(config, released_changes(task, algo))
     if name == "fast":
         config = replace_settings(config, fast_changes(task, algo))
     if name == "fast-tactile":

@@ -64,6 +64,9 @@ class SACAgent(Agent):
         self.config = config = config or SACConfig()
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
         actor_options, critic_options = network_options(observation_space, config)
+        for options in (actor_options, critic_options):
+            options.update(weights_init=config.weights_init, action_scale=config.action_input_scale)
+        actor_options["log_std"] = config.log_std
         pose_size = POSE_SIZE if config.critic_pose else 0
         self.critics = nn.ModuleList(
             [ContinuousQNetwork(*sizes, pose_size=pose_size, **critic_options) for _ in range(2)]

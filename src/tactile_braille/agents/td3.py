@@ -67,6 +67,8 @@ class TD3Agent(Agent):
             raise ValueError(f"policy_delay must be at least 1, got {config.policy_delay}")
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
         actor_options, critic_options = network_options(observation_space, config)
+        for options in (actor_options, critic_options):
+            options.update(weights_init=config.weights_init, action_scale=config.action_input_scale)
         pose_size = POSE_SIZE if config.critic_pose else 0
         self.critics = nn.ModuleList(
             [ContinuousQNetwork(*sizes, pose_size=pose_size, **critic_options) for _ in range(2)]
