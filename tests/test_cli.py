@@ -127,6 +127,11 @@ def test_benchmark_runs_each_preset_in_its_own_folders_and_refuses_unknown_rows(
             ("DiscreteArrows-v0", algo, seed) for algo in ("dqn", "sac_discrete") for seed in (3, 4)
         }
     assert [t.preset for t in calls[1][2]] == ["released"] * 4
+    # By default the committed rows' settings, so that a new seed joins its row rather than one of its own.
+    assert all(t.overrides == {"precision": "bf16", "threads": 1} for _, _, trials in calls for t in trials)
+    calls.clear()
+    assert main([*argv, "--precision", "fp32", "--threads", "2"]) == 0
+    assert calls[0][2][0].overrides == {"precision": "fp32", "threads": 2}
     assert main(["benchmark", "--paper", "--tasks", "DiscreteArrow-v0"]) == 2
     assert "no Table III rows for ['DiscreteArrow-v0']" in capsys.readouterr().err
     calls.clear()

@@ -816,7 +816,12 @@ def _add_archive_command(commands) -> None:
 
 def _add_benchmark_command(commands) -> None:
     """The ``benchmark`` command."""
-    bench = commands.add_parser("benchmark", help="reproduce the simulated part of the paper's Table III")
+    bench = commands.add_parser(
+        "benchmark",
+        help="reproduce the simulated part of the paper's Table III",
+        description="Runs default to bf16 autocast and one torch thread each, the settings of the "
+        "committed Table III rows (a run with other settings makes a row of its own in the report).",
+    )
     bench.add_argument("--paper", action="store_true", help="the paper's 8 simulated task x algorithm runs")
     bench.add_argument("--presets", nargs="+", choices=TRAINING_PRESETS, default=["paper"],
                        help="one sweep per preset, in ROOT/PRESET (and ARCHIVE/PRESET)")  # fmt: skip
@@ -826,7 +831,7 @@ def _add_benchmark_command(commands) -> None:
     bench.add_argument("--seeds", nargs="+", type=int, default=None, help="these seeds instead")
     bench.add_argument("--report", type=Path, default=None, help="default: ROOT/report; one per preset")
     _add_sweep_options(bench, "runs/paper-benchmark")
-    bench.set_defaults(handler=_benchmark)
+    bench.set_defaults(handler=_benchmark, precision="bf16", threads=1)
 
 
 def _add_data_command(commands) -> None:
