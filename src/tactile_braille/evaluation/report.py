@@ -371,6 +371,17 @@ def coverage_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     return "\n".join(lines)
 
 
+def _coverage_section(groups: dict[tuple[str, str, str], list[RunRecord]]) -> list[str]:
+    """The report's lines on how complete Table III is (:func:`coverage_table` under its heading)."""
+    return [
+        "### Table III coverage: seeds per row with the paper's and the released code's settings", "",
+        "Runs with the preset's own settings to its full epochs (the continuous alphabet's 2,000 are "
+        "asked only as far as compute allows); rows of an earlier `released` preset, or of runs that "
+        "change a setting, are in the tables above but not counted here.", "",
+        coverage_table(groups), "",
+    ]  # fmt: skip
+
+
 def _reached_cell(reached: list[int | None], epochs: list[int] | None = None) -> str:
     """First epochs at 0.95 over seeds; how many reached it where some did not, and, given the epochs
     each run ran (``epochs``), within how many the others did not (``not by epoch 100``)."""
@@ -779,12 +790,7 @@ def write_report(
         "'reset per key', as the released code ran it (a random start before every key; "
         "docs/evaluation.md); convergence is the paper's rule (first epoch reaching 95 % of "
         "the run's best test return) and, stricter, the first epoch whose test return reaches 0.95.",
-        "", results_table(groups), "",
-        "### Table III coverage: seeds per row with the paper's and the released code's settings", "",
-        "Runs with the preset's own settings to its full epochs (the continuous alphabet's 2,000 are "
-        "asked only as far as compute allows); rows of an earlier `released` preset, or of runs that "
-        "change a setting, are in the tables above but not counted here.", "",
-        coverage_table(groups), "", *([notes.strip(), ""] if notes else []),
+        "", results_table(groups), "", *_coverage_section(groups), *([notes.strip(), ""] if notes else []),
         f"![training curves]({link}curves.png)", "",
     ]  # fmt: skip
     lines += _by_task_section(groups, figures, link, written)
