@@ -13,6 +13,7 @@ from tactile_braille.agents.presets import preset_config
 from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
+    _coverage_section,
     _reached_cell,
     bootstrap_ci,
     compared_groups,
@@ -125,6 +126,11 @@ def test_coverage_counts_only_full_runs_of_a_presets_own_settings():
     # The continuous alphabet is asked as far as compute allows: 3 seeds of 100 epochs or more.
     assert rows["cont alpha, SAC", "paper"].endswith("| 1 | 120 | 3 x 100 (of 2,000) | 2 more seeds |")
     assert rows["disc arrow, SAC_DISC", "released"].endswith("| 0 | - | 5 x 25 | not run |")
+    # A report with a run of the paper's presets carries the table; one of other presets' runs does not.
+    assert _coverage_section(group(records))[0].startswith("### Table III coverage")
+    fast = record("DiscreteAlphabet-v0", "dqn", 0, [0.5] * 100)
+    fast.config = preset_config("fast", task, "dqn")
+    assert _coverage_section(group([fast])) == []
 
 
 def test_runs_of_two_tracks_are_tabled_apart_under_their_tracks():

@@ -364,7 +364,7 @@ class GaussianPolicy(nn.Module):
     """SAC's tanh-squashed Gaussian policy over actions in [-1, 1].
 
     ``log_std``: ``"clamp"`` (ours) clips the log deviation to [-5, 2]; ``"tanh"`` (the
-    released code's) maps it through a tanh onto [-20, 2], which starts it near -9.
+    released code's) maps it through a tanh onto [-20, 2] (-9 where the head's output is 0).
     ``action_scale`` and ``weights_init`` as :class:`ContinuousQNetwork`'s (the
     previous action is scaled; the policy's own actions stay in [-1, 1]).
     """

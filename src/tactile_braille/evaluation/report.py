@@ -349,9 +349,9 @@ def coverage_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
                 r for (t, a, variant), records in groups.items() if (t, a) == (task, algo)
                 and variant in (f"{preset}, bf16", f"{preset}, fp32") for r in records
             ]  # fmt: skip
-            done = sorted({r.seed for r in runs if len(r.returns) >= epochs_asked})
+            finished = [r for r in runs if len(r.returns) >= epochs_asked]
+            done, epochs = sorted({r.seed for r in finished}), sorted({len(r.returns) for r in finished})
             short = sorted(len(r.returns) for r in runs if len(r.returns) < epochs_asked)
-            epochs = sorted({len(r.returns) for r in runs if len(r.returns) >= epochs_asked})
             epochs_text = "-" if not epochs else (
                 str(epochs[0]) if len(epochs) == 1 else f"{epochs[0]}-{epochs[-1]}"
             )  # fmt: skip
@@ -372,7 +372,10 @@ def coverage_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
 
 
 def _coverage_section(groups: dict[tuple[str, str, str], list[RunRecord]]) -> list[str]:
-    """The report's lines on how complete Table III is (:func:`coverage_table` under its heading)."""
+    """The report's lines on how complete Table III is (:func:`coverage_table` under its heading); none
+    for a report without a run of the paper's presets (the table would only say "not run")."""
+    if not any(variant.split(",")[0] in TABLE3_PRESETS for _, _, variant in groups):
+        return []
     return [
         "### Table III coverage: seeds per row with the paper's and the released code's settings", "",
         "Runs with the preset's own settings to its full epochs (the continuous alphabet's 2,000 are "
