@@ -49,8 +49,11 @@ run() {
     local root=runs/paper-benchmark args=("$@") i
     for ((i = 0; i < ${#args[@]} - 1; i++)); do [ "${args[i]}" = --root ] && root=${args[i + 1]}; done
     local status=0
+    # appended, not truncated on open: a worker's resource tracker that outlives the sweep then writes
+    # after the exit status line below, not over it
+    : > "$OUT/sweep.log"
     timeout --kill-after=20 "$budget" "$python" -m tactile_braille.cli benchmark "$@" --archive "$archive" \
-        --device "${DEVICE:-cuda}" --threads 1 --jobs "${JOBS:-14}" --ray no > "$OUT/sweep.log" 2>&1 || status=$?
+        --device "${DEVICE:-cuda}" --threads 1 --jobs "${JOBS:-14}" --ray no >> "$OUT/sweep.log" 2>&1 || status=$?
     echo "benchmark exit status $status (124: stopped at the budget of $budget s)" >> "$OUT/sweep.log"
     "$python" - "$root" > "$OUT/epochs.tsv" <<'PYTHON'
 import csv, sys
