@@ -1031,6 +1031,53 @@ def test_episodes_start_where_the_last_one_left_the_sensor_at_the_kept_share(env
         assert 0.3 < episodes.kept_starts / len(kept) < 0.7
 
 
+class ActionLog(gymnasium.Wrapper):
+    """The actions each episode was stepped with, as the environment received them."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.episodes = []
+
+    def reset(self, **kwargs):
+        self.episodes.append([])
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        self.episodes[-1].append(np.array(action, copy=True))
+        return self.env.step(action)
+
+
+@pytest.mark.parametrize("task", [DISCRETE_TASK, CONTINUOUS_TASK])
+@pytest.mark.parametrize("final_press", [False, True])
+def test_a_final_press_ends_each_episode_the_time_limit_would_cut(env_datasets, task, final_press):
+    algo = "dqn" if task == DISCRETE_TASK else "sac"
+    config = TrainConfig(task=task, algo=algo, dataset=str(env_datasets[task]), threads=1, final_press=final_press)
+    env = ActionLog(make_env(config))
+    episodes = Episodes(env, make_replay(config, env), RunExtension(), np.random.default_rng(0), 0.0, final_press)
+    rng = np.random.default_rng(1)
+    for _ in range(300):  # moves and light taps only: no episode ends by itself
+        episodes.step(int(rng.integers(4)) if algo == "dqn" else np.array([*rng.uniform(-1, 1, 2), -1.0], "f4"))
+    done = env.episodes[:-1]
+    assert len(done) == 12 and all(len(actions) == 25 for actions in done)
+    pressed = [actions[-1] == 4 if algo == "dqn" else actions[-1][2] == 1.0 for actions in done]
+    assert all(pressed) if final_press else not any(pressed)
+    assert episodes.final_presses == (12 if final_press else 0)
+    if algo == "sac":  # the press keeps the move that was asked
+        assert all(np.all(np.abs(actions[-1][:2]) <= 1.0) and actions[-1][:2].any() for actions in done)
+    for actions in done:  # only the last step is changed
+        assert all((a != 4) if algo == "dqn" else a[2] == -1.0 for a in actions[:-1])
+
+
+def test_a_run_with_final_presses_trains_and_records_the_setting(env_datasets, tmp_path):
+    config = TrainConfig(
+        dataset=str(env_datasets[DISCRETE_TASK]), epochs=1, steps_per_epoch=60, start_steps=10, threads=1,
+        final_press=True, agent=DQNConfig(hidden=HIDDEN, batch_size=8), evaluation={"test_episodes": 1},
+    )  # fmt: skip
+    run = train(config, run_dir=tmp_path / "pressed", progress=False)
+    assert json.loads((run / "config.json").read_text())["final_press"] is True
+    assert read_progress(run)[0]["train/episodes"] >= 60 // 25
+
+
 def test_a_run_that_keeps_poses_trains_resumes_and_names_the_setting(env_datasets, tmp_path):
     config = TrainConfig(
         dataset=str(env_datasets[DISCRETE_TASK]), epochs=1, steps_per_epoch=40, start_steps=10, threads=1,

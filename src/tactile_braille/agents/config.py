@@ -433,6 +433,11 @@ class TrainConfig:
             sensor, as the paper's typing evaluation starts each key of a sequence (drawn per
             episode; 0: every episode from a random start pose, the paper's training). Where
             episodes start is the training's schedule, not an input, so on the ``tactile`` track.
+        final_press: training episodes that reach their step limit end with a press: the last
+            step's action presses (discrete: PRESS; continuous: the action with its deepest tap),
+            so that nearly every episode has an achieved goal to relabel its steps with, where a
+            time-out has none (ours; False: the paper's). The step count is the agent's own, not an
+            input, so on the ``tactile`` track.
         backend: environment backend (``dataset``, ``render``, or ``rig``: a robot, ``train(rig=...)``).
         frame_noise: ``(mm, degrees)``: the render backend's work frame off by an error drawn anew each
             episode, offsets within +-mm along x and y, a turn within +-degrees (domain randomisation
@@ -469,6 +474,7 @@ class TrainConfig:
     max_episode_steps: int | None = None
     taps: int = 1
     keep_pose_fraction: float = 0.0
+    final_press: bool = False
     backend: Backend = "dataset"
     frame_noise: tuple[float, ...] | None = None
     dataset: str | None = None
@@ -562,6 +568,8 @@ class TrainConfig:
                 f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "
                 f"option keep_pose), got {self.task}"
             )
+        if self.final_press and task is None:
+            raise ValueError(f"final_press ends episodes with the braille tasks' press, got {self.task}")
         if self.touch.labels == "observation" and task is None:
             raise ValueError(
                 f"touch.labels='observation' reads the braille tasks' documented actions, got {self.task}"

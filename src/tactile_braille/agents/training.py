@@ -49,6 +49,7 @@ from tactile_braille.agents.td3 import TD3Agent
 from tactile_braille.agents.touch import TouchAgent, feature_space, touch_input_size
 from tactile_braille.envs.memory import TapMemory
 from tactile_braille.envs.registry import task_of
+from tactile_braille.envs.tasks import DISCRETE_ACTIONS
 from tactile_braille.supervised.touch import TouchEncoder, TouchEncoderConfig
 
 
@@ -109,7 +110,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
         warm_start(run_dir, config, agent)
     write_config(run_dir, config)  # a resume's new epochs or machine, once its world and checkpoint are read
     extension = make_extension(config, env, agent, buffer, run_dir)
-    episodes = Episodes(env, buffer, extension, rng, config.keep_pose_fraction)
+    episodes = Episodes(env, buffer, extension, rng, config.keep_pose_fraction, config.final_press)
     burst, batch_size = config.update_every * config.updates_per_step, config.agent.batch_size
     losses: dict[str, float] = {}
     with EpochLog(
@@ -201,7 +202,8 @@ class Episodes:
     are drawn from the run's generator. With ``keep_pose_fraction`` that share
     of the episodes after the first starts where the last one left the sensor
     (``reset(options={"keep_pose": True})``, as between the keys the paper's
-    typing evaluation asks in a row).
+    typing evaluation asks in a row). With ``final_press`` the last step an
+    episode's time limit allows presses (:func:`pressing`), whatever was asked.
     """
 
     def __init__(
@@ -211,11 +213,13 @@ class Episodes:
         extension: RunExtension,
         rng,
         keep_pose_fraction: float = 0.0,
+        final_press: bool = False,
     ) -> None:
         self.env, self.buffer, self.extension, self.rng = env, buffer, extension, rng
         self.keep_pose_fraction = keep_pose_fraction
+        self.last_step = env.spec.max_episode_steps if final_press else None
         self.returns: list[float] = []
-        self.kept_starts = 0
+        self.kept_starts = self.final_presses = 0
         self._start(first=True)
 
     def _start(self, first: bool = False) -> None:
@@ -224,10 +228,14 @@ class Episodes:
         self.kept_starts += keep
         self.observation, info = self.env.reset(seed=seed, options={"keep_pose": True} if keep else None)
         self.buffer.start_episode(self.observation, self.extension.label(self.observation, info))
-        self.episode_return = 0.0
+        self.episode_return, self.episode_steps = 0.0, 0
 
     def step(self, action) -> None:
         """One environment step, stored; a new episode if it ended."""
+        self.episode_steps += 1
+        if self.episode_steps == self.last_step:
+            action = pressing(self.env.action_space, action)
+            self.final_presses += 1
         observation, reward, terminated, truncated, info = self.env.step(action)
         self.buffer.add_step(action, reward, observation, terminated, self.extension.label(observation, info))
         self.observation, self.episode_return = observation, self.episode_return + reward
@@ -241,6 +249,16 @@ class Episodes:
         returns, self.returns = self.returns, []
         mean = float(np.mean(returns)) if returns else float("nan")
         return {"train/episodes": len(returns), "train/episodic_return": mean}
+
+
+def pressing(space: gym.Space, action):
+    """``action`` made a press: the discrete tasks' PRESS; on the continuous tasks the same move
+    with the deepest tap (depth 1 in [-1, 1])."""
+    if isinstance(space, gym.spaces.Box):
+        action = np.array(action, dtype=np.float32, copy=True)
+        action[-1] = 1.0
+        return action
+    return DISCRETE_ACTIONS.index("PRESS")
 
 
 def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
