@@ -1051,12 +1051,14 @@ class ActionLog(gymnasium.Wrapper):
 @pytest.mark.parametrize("final_press", [False, True])
 def test_a_final_press_ends_each_episode_the_time_limit_would_cut(env_datasets, task, final_press):
     algo = "dqn" if task == DISCRETE_TASK else "sac"
-    config = TrainConfig(task=task, algo=algo, dataset=str(env_datasets[task]), threads=1, final_press=final_press)
+    dataset = str(env_datasets[task])
+    config = TrainConfig(task=task, algo=algo, dataset=dataset, threads=1, final_press=final_press)
     env = ActionLog(make_env(config))
-    episodes = Episodes(env, make_replay(config, env), RunExtension(), np.random.default_rng(0), 0.0, final_press)
-    rng = np.random.default_rng(1)
+    replay, rng = make_replay(config, env), np.random.default_rng(1)
+    episodes = Episodes(env, replay, RunExtension(), np.random.default_rng(0), 0.0, final_press)
     for _ in range(300):  # moves and light taps only: no episode ends by itself
-        episodes.step(int(rng.integers(4)) if algo == "dqn" else np.array([*rng.uniform(-1, 1, 2), -1.0], "f4"))
+        move = np.array([*rng.uniform(-1, 1, 2), -1.0], "f4")
+        episodes.step(int(rng.integers(4)) if algo == "dqn" else move)
     done = env.episodes[:-1]
     assert len(done) == 12 and all(len(actions) == 25 for actions in done)
     pressed = [actions[-1] == 4 if algo == "dqn" else actions[-1][2] == 1.0 for actions in done]
