@@ -78,6 +78,11 @@ def test_train_config_rejects_bad_settings(kwargs, message):
         ({"keep_pose_fraction": -0.1}, "keep_pose_fraction is a share of episodes"),
         ({"task": "toys/BitFlipPress-v0", "keep_pose_fraction": 0.5}, "keep_pose_fraction starts episodes"),
         ({"task": "toys/BitFlipPress-v0", "final_press": True}, "final_press ends episodes with the braille"),
+        ({"replay": {"shift": -2}}, "shift must be at least 0"),
+        (
+            {"touch": {"enabled": True}, "replay": {"shift": 2}},
+            "replay.shift=2 moves images, but with the touch",
+        ),
         ({"start_steps": -1}, "start_steps"),
         ({"frame_noise": (1.0, 2.0)}, "frame_noise randomises the live renderer's .* not 'dataset'"),
         ({"frame_noise": (1.0,), "backend": "render"}, r"frame_noise is \(mm, degrees\), both >= 0"),

@@ -37,6 +37,7 @@ from tactile_braille.agents.replay import (
     Relabelling,
     SampledRelabelling,
     make_relabelling,
+    random_shift,
 )
 from tactile_braille.supervised.touch import LabelledTaps
 
@@ -102,6 +103,55 @@ def test_sampled_images_and_next_images_follow_the_episode():
         batch["images"], batch["next_images"], batch["actions"], strict=True
     ):
         assert image.max() == frames[action] and next_image.max() == frames[action + 1]
+
+
+def shifted(image: np.ndarray, rows: int, columns: int) -> np.ndarray:
+    """``image`` (C, H, W) moved by (rows, columns), read pixel by pixel with the indices clipped."""
+    _, height, width = image.shape
+    r = np.clip(np.arange(height) + rows, 0, height - 1)
+    c = np.clip(np.arange(width) + columns, 0, width - 1)
+    return image[:, r][:, :, c]
+
+
+def offset_of(image: np.ndarray, source: np.ndarray, pixels: int) -> tuple[int, int] | None:
+    for rows in range(-pixels, pixels + 1):
+        for columns in range(-pixels, pixels + 1):
+            if np.array_equal(image, shifted(source, rows, columns)):
+                return rows, columns
+    return None
+
+
+def test_random_shift_moves_each_image_by_its_own_offset_with_its_edges_repeated():
+    rng = np.random.default_rng(0)
+    images = rng.integers(0, 256, size=(300, 1, 12, 12), dtype=np.uint8)
+    moved = random_shift(images, 2, np.random.default_rng(1))
+    assert moved.shape == images.shape and moved.dtype == np.uint8
+    offsets = [offset_of(m, i, 2) for m, i in zip(moved, images, strict=True)]
+    assert None not in offsets and len(set(offsets)) == 25  # every offset in [-2, 2]^2, drawn per image
+    np.testing.assert_array_equal(random_shift(images, 0, rng), images)
+
+
+def test_a_replay_with_shift_serves_its_images_moved_and_the_rest_unchanged():
+    def edge_observation(column: int, goal: int, achieved: int | None = None) -> dict:
+        seen = observation(0, goal, achieved)
+        seen["observation"][:, column:] = 255  # a vertical edge, where a shift shows
+        seen["observation"][40:, :] = 0
+        return seen
+
+    buffers = [EpisodeReplayBuffer(100, GOALS, (), 5, her=False, shift=shift) for shift in (0, 3)]
+    for buffer in buffers:
+        buffer.start_episode(edge_observation(50, 1))
+        for t in range(4):
+            buffer.add_step(t, 0.0, edge_observation(30 + 10 * t, 1), terminated=False)
+        buffer.end_episode()
+    plain, moved = (buffer.sample(64, np.random.default_rng(2)) for buffer in buffers)
+    for name in ("actions", "goals", "rewards", "dones", "previous_actions"):
+        np.testing.assert_array_equal(plain[name], moved[name])
+    for key in ("images", "next_images"):
+        offsets = [offset_of(m, p, 3) for m, p in zip(moved[key], plain[key], strict=True)]
+        assert None not in offsets and len(set(offsets)) > 10
+    with pytest.raises(ValueError, match="shift is a number of pixels, at least 0, got -1"):
+        EpisodeReplayBuffer(100, GOALS, (), 5, shift=-1)
 
 
 def test_ring_overwrites_the_oldest_transitions():

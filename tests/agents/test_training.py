@@ -1080,6 +1080,16 @@ def test_a_run_with_final_presses_trains_and_records_the_setting(env_datasets, t
     assert read_progress(run)[0]["train/episodes"] >= 60 // 25
 
 
+def test_a_run_with_shifted_images_trains_and_records_the_setting(env_datasets, tmp_path):
+    config = TrainConfig(
+        dataset=str(env_datasets[DISCRETE_TASK]), epochs=1, steps_per_epoch=40, start_steps=10, threads=1,
+        replay={"shift": 4}, agent=DQNConfig(hidden=HIDDEN, batch_size=8), evaluation={"test_episodes": 1},
+    )  # fmt: skip
+    run = train(config, run_dir=tmp_path / "shifted", progress=False)
+    assert json.loads((run / "config.json").read_text())["replay"]["shift"] == 4
+    assert read_progress(run)[0]["updates"] > 0
+
+
 def test_a_run_that_keeps_poses_trains_resumes_and_names_the_setting(env_datasets, tmp_path):
     config = TrainConfig(
         dataset=str(env_datasets[DISCRETE_TASK]), epochs=1, steps_per_epoch=40, start_steps=10, threads=1,

@@ -335,16 +335,21 @@ class ReplayConfig:
             transition for every goal, relabelled when sampled; :mod:`~tactile_braille.agents.replay`).
         n_step: steps of its episode each sampled transition's return spans, discounted by the
             agent's ``gamma`` (1: one-step targets, the paper's; ours above 1).
+        shift: each sampled image (and, drawn apart, its next image) moved by up to this many
+            pixels along each axis, its edges repeated: DrQ's augmentation (Kostrikov et al.
+            2021; 0: none, the paper's). The run's own frames, so on the ``tactile`` track.
     """
 
     capacity: int = 100_000
     her: bool = True
     relabel: RelabelRule = "paper"
     n_step: int = 1
+    shift: int = 0
 
     def __post_init__(self) -> None:
         check_types(self)
         _at_least(self, 1, "capacity", "n_step")
+        _at_least(self, 0, "shift")
 
 
 @dataclass(frozen=True)
@@ -568,6 +573,10 @@ class TrainConfig:
                 f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "
                 f"option keep_pose), got {self.task}"
             )
+        if self.replay.shift and self.touch.enabled:
+            raise ValueError(f"replay.shift={self.replay.shift} moves images, but with the touch "
+                             "encoder the agent learns on its features: set touch.enabled=False or "
+                             "shift=0")  # fmt: skip
         if self.final_press and task is None:
             raise ValueError(f"final_press ends episodes with the braille tasks' press, got {self.task}")
         if self.touch.labels == "observation" and task is None:

@@ -358,6 +358,21 @@ def make_relabelling(relabel: str, her: bool = True, final: float = 0.4, random:
 
 
 # ================================================================= the buffer
+def random_shift(images: np.ndarray, pixels: int, rng: np.random.Generator) -> np.ndarray:
+    """Each of the (B, C, H, W) ``images`` moved by its own whole number of pixels in
+    [-``pixels``, ``pixels``] along each axis, the edge pixels repeated into the space it leaves
+    (DrQ's pad-and-crop)."""
+    batch, _, height, width = images.shape
+    padded = np.pad(images, ((0, 0), (0, 0), (pixels, pixels), (pixels, pixels)), mode="edge")
+    rows, columns = rng.integers(0, 2 * pixels + 1, size=(2, batch))
+    return np.stack(
+        [
+            padded[i, :, r : r + height, c : c + width]
+            for i, (r, c) in enumerate(zip(rows, columns, strict=True))
+        ]
+    )
+
+
 class EpisodeReplayBuffer:
     """Transitions of goal-conditioned episodes, with hindsight relabelling.
 
@@ -383,6 +398,7 @@ class EpisodeReplayBuffer:
         n_step: steps of an episode a sampled transition's return spans (1: one-step
             transitions, the paper's); above 1 its rewards are discounted by ``gamma``.
         gamma: the agent's discount, needed where ``n_step`` > 1.
+        shift: sampled images moved by up to this many pixels (:func:`random_shift`; 0: none).
     """
 
     def __init__(
@@ -401,7 +417,10 @@ class EpisodeReplayBuffer:
         n_step: int = 1,
         gamma: float | None = None,
         all_goals: bool = False,
+        shift: int = 0,
     ) -> None:
+        if shift < 0:
+            raise ValueError(f"shift is a number of pixels, at least 0, got {shift}")
         if n_step < 1:
             raise ValueError(f"n_step must be at least 1, got {n_step}")
         if n_step > 1 and (gamma is None or not 0 <= gamma <= 1):
@@ -421,6 +440,7 @@ class EpisodeReplayBuffer:
         self.capacity = int(capacity)
         self.poses, self.all_goals = bool(poses), bool(all_goals)
         self.n_step, self.gamma = int(n_step), gamma
+        self.shift = int(shift)
         self.her = her
         self.relabel = relabel
         self.relabel_final, self.relabel_random = float(relabel_final), float(relabel_random)
@@ -589,6 +609,11 @@ class EpisodeReplayBuffer:
             batch["goal_weights"] = self.relabelling.goal_weights(self.goals[index], self.finals[index])
         if self.n_step > 1:
             batch["steps"] = steps
+        if self.shift:
+            if self.cache.features is not None:
+                raise RuntimeError(f"shift={self.shift} moves images, but this replay serves features")
+            batch["images"] = random_shift(batch["images"], self.shift, rng)
+            batch["next_images"] = random_shift(batch["next_images"], self.shift, rng)
         if self.poses:
             poses = self.store.labels[frames, :3]  # (B, 2, 3)
             if np.isnan(poses).any():

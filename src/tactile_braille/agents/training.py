@@ -331,4 +331,5 @@ def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
         n_step=config.replay.n_step,
         gamma=config.agent.gamma,
         all_goals=getattr(config.agent, "all_goals", False),
+        shift=config.replay.shift,
     )
