@@ -573,10 +573,6 @@ class TrainConfig:
                 f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "
                 f"option keep_pose), got {self.task}"
             )
-        if self.replay.shift and self.touch.enabled:
-            raise ValueError(f"replay.shift={self.replay.shift} moves images, but with the touch "
-                             "encoder the agent learns on its features: set touch.enabled=False or "
-                             "shift=0")  # fmt: skip
         if self.final_press and task is None:
             raise ValueError(f"final_press ends episodes with the braille tasks' press, got {self.task}")
         if self.touch.labels == "observation" and task is None:
@@ -610,6 +606,10 @@ class TrainConfig:
             raise ValueError(
                 f"the touch encoder reads one tap at a time: taps={self.taps} stacks several, set taps=1"
             )
+        if touch.enabled and self.replay.shift:
+            raise ValueError(f"replay.shift={self.replay.shift} moves images, but with the touch "
+                             "encoder the agent learns on its features: set touch.enabled=False or "
+                             "shift=0")  # fmt: skip
         if touch.labels != "robot" and not touch.enabled:
             raise ValueError(f"touch.labels={touch.labels!r} is the touch encoder's: set touch.enabled too")
         if touch.goal_positions and touch.labels == "observation" and touch.inputs != "readout":
