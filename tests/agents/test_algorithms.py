@@ -613,6 +613,21 @@ def test_an_inverse_dynamics_loss_trains_the_q_networks_encoder_to_tell_the_acti
         build("dqn", tasks, inverse_dynamics=-1.0)
 
 
+def test_a_goal_difference_dqn_learns_its_goals_places(tasks):
+    """``goal_difference``: the DQN's Q-network takes the goal through learnt places; an update moves the
+    goals' places, which its state holds; a negative size, or one with goal heads, is refused."""
+    agent = build("dqn", tasks, goal_difference=4)
+    assert agent.q.difference is not None and agent.target.difference is not None
+    places = agent.q.difference.goal_place.weight.detach().clone()
+    assert all(np.isfinite(value) for value in agent.update(make_batch("dqn", tasks)).values())
+    assert not torch.equal(places, agent.q.difference.goal_place.weight)
+    assert "difference.goal_place.weight" in agent.q.state_dict()
+    with pytest.raises(ValueError, match="goal_difference is a size: at least 0, got -1"):
+        build("dqn", tasks, goal_difference=-1)
+    with pytest.raises(ValueError, match="goal_difference and goal_heads each take the goal from the input: choose one"):
+        build("dqn", tasks, goal_difference=4, goal_heads=True)
+
+
 def relabelled_to(data: dict[str, np.ndarray], goal: int) -> dict[str, np.ndarray]:
     """A batch with every transition's goal set to ``goal``, rewarded where it pressed that key."""
     size, goals = data["goals"].shape

@@ -154,6 +154,34 @@ def test_plain_q_heads_give_the_head_s_outputs_as_q_values(goal_heads):
         DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, features=FEATURES, dueling=False, dueling_split=True)
 
 
+@pytest.mark.parametrize("weights_init", ["he", "released"])
+def test_a_goal_difference_network_values_where_the_goal_lies_from_the_observation(weights_init):
+    """``goal_difference``: the goal leaves the trunk; the values read the difference of the
+    observation's learnt place and the goal's, so two goals at one place are valued alike and a
+    shift of every place together changes nothing; every goal's values at once are each goal's own."""
+    torch.manual_seed(0)
+    net = DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, hidden=(64,), features=FEATURES, goal_difference=3,
+                          weights_init=weights_init)  # fmt: skip
+    assert net.trunk.dense[0].in_features == FEATURES + PREVIOUS  # no goal in the trunk
+    features, previous = torch.randn(5, FEATURES), torch.randn(5, PREVIOUS)
+    goals = torch.eye(GOALS)[torch.tensor([0, 1, 2, 3, 1])]
+    with torch.no_grad():
+        values = net(features, goals, previous)
+        assert not torch.allclose(values, net(features, torch.roll(goals, 1, dims=-1), previous))
+        every = net.every_goal(features, previous)
+        assert every.shape == (5, GOALS, ACTIONS)
+        assert torch.allclose(every[torch.arange(5), goals.argmax(-1)], values, atol=1e-6)
+        shift = torch.randn(3)
+        net.difference.place.bias += shift  # every place moves by the same vector
+        net.difference.goal_place.weight += shift[:, None]
+        assert torch.allclose(net(features, goals, previous), values, atol=1e-5)
+        net.difference.goal_place.weight[:, 2] = net.difference.goal_place.weight[:, 0]  # goal 2 at goal 0's place
+        every = net.every_goal(features, previous)
+        assert torch.allclose(every[:, 2], every[:, 0]) and not torch.allclose(every[:, 1], every[:, 0])
+    with pytest.raises(ValueError, match="through goal_heads or goal_difference, not both"):
+        DuelingQNetwork(ACTIONS, GOALS, PREVIOUS, features=FEATURES, goal_heads=True, goal_difference=3)
+
+
 def test_the_policy_network_takes_the_released_initial_weights_where_asked():
     torch.manual_seed(0)
     policy = PolicyNetwork(ACTIONS, GOALS, PREVIOUS, weights_init="released")

@@ -129,6 +129,10 @@ class DQNConfig:
         inverse_dynamics: the weight of an auxiliary loss on the Q-network's encoder: a head
             predicts each transition's action from the encoder's features of its two frames
             (inverse dynamics; the action is the next observation's previous action). 0: none.
+        goal_difference: the goal leaves the Q-network's input: the dense layers read the
+            difference between a learnt place of the observation and one of the goal, of this many
+            numbers (:class:`~tactile_braille.agents.networks.GoalDifference`). 0: the goal is an
+            input (the paper's).
     """
 
     gamma: float = 0.95
@@ -151,9 +155,14 @@ class DQNConfig:
     dueling_split: bool = False
     weights_init: WeightsInit = "he"
     inverse_dynamics: float = 0.0
+    goal_difference: int = 0
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
+        if self.goal_difference < 0:
+            raise ValueError(f"goal_difference is a size: at least 0, got {self.goal_difference}")
+        if self.goal_difference and self.goal_heads:
+            raise ValueError("goal_difference and goal_heads each take the goal from the input: choose one")
 
 
 @dataclass(frozen=True)

@@ -59,7 +59,7 @@ class DQNAgent(Agent):
         self.q = DuelingQNetwork(
             self.num_actions, goal_size, previous_size, self.config.hidden,
             goal_heads=self.config.goal_heads, dueling_split=self.config.dueling_split,
-            weights_init=self.config.weights_init, **options,
+            weights_init=self.config.weights_init, goal_difference=self.config.goal_difference, **options,
         ).to(self.device)  # fmt: skip
         self.target = copy.deepcopy(self.q).requires_grad_(False)
         learnt = list(self.q.parameters())

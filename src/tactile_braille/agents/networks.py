@@ -139,7 +139,8 @@ def released_init(module: nn.Module) -> None:
     if isinstance(module, nn.Conv2d | nn.Linear):
         std = math.sqrt(1.0 / module.weight[0].numel()) / TRUNCATED_NORMAL_STD
         nn.init.trunc_normal_(module.weight, std=std, a=-2 * std, b=2 * std)
-        nn.init.zeros_(module.bias)
+        if module.bias is not None:
+            nn.init.zeros_(module.bias)
 
 
 def check_weights_init(weights_init: str) -> None:
@@ -196,6 +197,11 @@ class DuelingQNetwork(nn.Module):
         weights_init: ``"he"`` (ours) or ``"released"`` (:func:`released_init` for every layer).
         dueling: a value and an advantage head; ``False``: one head of Q-values (the released
             discrete SAC's critics), which leaves ``dueling_split`` nothing to split.
+        goal_difference: the goal does not join the trunk: a linear layer gives the observation a
+            learnt *place* of this many numbers, a linear embedding gives the goal one, and a dense
+            ReLU layer reads their difference (the heads read it): values that depend on where the
+            goal lies from the sensor, the same rule for every pair of keys (a two-stream UVFA with
+            a difference). 0: the goal is an input (the paper's).
         options: ``features`` and ``layer_norm`` of :class:`GoalConditionedTrunk`.
     """
 
@@ -210,17 +216,24 @@ class DuelingQNetwork(nn.Module):
         dueling_split: bool = False,
         weights_init: str = "he",
         dueling: bool = True,
+        goal_difference: int = 0,
         **options,
     ) -> None:
         super().__init__()
         check_weights_init(weights_init)
         if dueling_split and not dueling:
             raise ValueError("dueling_split splits a dueling network's units: it needs dueling=True")
+        if goal_difference and goal_heads:
+            raise ValueError("a network takes the goal through goal_heads or goal_difference, not both")
         self.goal_heads, self.goal_size, self.num_actions = goal_heads, goal_size, num_actions
-        vector_size = previous_action_size if goal_heads else goal_size + previous_action_size
+        goal_input = not (goal_heads or goal_difference)
+        vector_size = goal_size + previous_action_size if goal_input else previous_action_size
         heads = goal_size if goal_heads else 1
         self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
         units = self.trunk.features
+        self.difference = None
+        if goal_difference:
+            self.difference = GoalDifference(units, goal_size, goal_difference)
         self.split = units // 2 if dueling_split else 0
         self.value = _small_head(self.split or units, heads) if dueling else None
         self.advantage = _small_head(units - self.split, heads * num_actions)
@@ -232,6 +245,8 @@ class DuelingQNetwork(nn.Module):
     ) -> torch.Tensor:
         if self.goal_heads:
             return _goal_row(self.every_goal(images, previous_actions), goals)
+        if self.difference is not None:
+            return _dueling(*self._heads(self.difference(self.trunk(images, previous_actions), goals)))
         return _dueling(*self._heads(self.trunk(images, goals, previous_actions)))
 
     def every_goal(self, images: torch.Tensor, previous_actions: torch.Tensor) -> torch.Tensor:
@@ -241,6 +256,8 @@ class DuelingQNetwork(nn.Module):
             value, advantage = self._heads(self.trunk(images, previous_actions))
             value = None if value is None else value[..., None]
             return _dueling(value, advantage.unflatten(-1, (self.goal_size, self.num_actions)))
+        if self.difference is not None:
+            return _dueling(*self._heads(self.difference.every_goal(self.trunk(images, previous_actions))))
         return _dueling(*self._heads(self.trunk.every_goal(images, previous_actions, self.goal_size)))
 
     def _heads(self, hidden: torch.Tensor) -> tuple[torch.Tensor | None, torch.Tensor]:
@@ -249,6 +266,29 @@ class DuelingQNetwork(nn.Module):
         if self.split:
             return self.value(hidden[..., : self.split]), self.advantage(hidden[..., self.split :])
         return (None if self.value is None else self.value(hidden)), self.advantage(hidden)
+
+
+class GoalDifference(nn.Module):
+    """Dense ReLU units on the difference of two learnt places, the observation's (a linear layer on
+    the trunk's units) and the goal's (a linear embedding of its one-hot): ``ReLU(W (place(h) -
+    embed(g)) + b)``, as many units as the trunk's."""
+
+    def __init__(self, units: int, goal_size: int, size: int) -> None:
+        super().__init__()
+        self.place = nn.Linear(units, size)
+        self.goal_place = nn.Linear(goal_size, size, bias=False)
+        self.dense = nn.Sequential(nn.Linear(size, units), nn.ReLU())
+        he_init(self.place)
+        he_init(self.dense[0])
+        nn.init.kaiming_normal_(self.goal_place.weight, nonlinearity="relu")
+
+    def forward(self, hidden: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
+        return self.dense(self.place(hidden) - self.goal_place(goals.to(hidden.dtype)))
+
+    def every_goal(self, hidden: torch.Tensor) -> torch.Tensor:
+        """The units under every goal, shape (B, goal_size, units): each goal's place is its column."""
+        places = self.goal_place.weight.T.to(hidden.dtype)  # (goal_size, size)
+        return self.dense(self.place(hidden)[:, None] - places[None])
 
 
 class InverseDynamicsHead(nn.Module):
