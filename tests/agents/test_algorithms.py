@@ -624,7 +624,7 @@ def test_a_goal_difference_dqn_learns_its_goals_places(tasks):
     assert "difference.goal_place.weight" in agent.q.state_dict()
     with pytest.raises(ValueError, match="goal_difference is a size: at least 0, got -1"):
         build("dqn", tasks, goal_difference=-1)
-    with pytest.raises(ValueError, match="goal_difference and goal_heads each take the goal from the input: choose one"):
+    with pytest.raises(ValueError, match="goal_difference and goal_heads each take the goal"):
         build("dqn", tasks, goal_difference=4, goal_heads=True)
 
 

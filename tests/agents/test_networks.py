@@ -175,7 +175,8 @@ def test_a_goal_difference_network_values_where_the_goal_lies_from_the_observati
         net.difference.place.bias += shift  # every place moves by the same vector
         net.difference.goal_place.weight += shift[:, None]
         assert torch.allclose(net(features, goals, previous), values, atol=1e-5)
-        net.difference.goal_place.weight[:, 2] = net.difference.goal_place.weight[:, 0]  # goal 2 at goal 0's place
+        places = net.difference.goal_place.weight
+        places[:, 2] = places[:, 0]  # goal 2 at goal 0's place
         every = net.every_goal(features, previous)
         assert torch.allclose(every[:, 2], every[:, 0]) and not torch.allclose(every[:, 1], every[:, 0])
     with pytest.raises(ValueError, match="through goal_heads or goal_difference, not both"):
