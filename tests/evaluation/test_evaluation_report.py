@@ -324,13 +324,17 @@ def test_a_run_with_frame_noise_names_it_in_its_variant():
 
 
 def test_the_by_task_figure_draws_rows_of_five_seeds_or_more(tmp_path):
+    """Five seeds or more, the paper's; on the continuous alphabet three, the seeds its rows ask."""
     five = [record("DiscreteArrows-v0", "dqn", seed, [0.5, 0.96, 1.0], 1.0, 240) for seed in range(5)]
     three = [record("DiscreteArrows-v0", "sac_discrete", seed, [0.0, 0.5], 0.5, 400) for seed in range(3)]
     alphabet = [record("DiscreteAlphabet-v0", "dqn", seed, [0.1, 0.2], 0.2, 1900) for seed in range(6)]
-    groups = group(five + three + alphabet)
+    long = [record("ContinuousAlphabet-v0", "td3", seed, [0.0, 0.05], 0.0, 270) for seed in range(3)]
+    two = [record("ContinuousAlphabet-v0", "sac", seed, [0.0, 0.1], 0.0, 270) for seed in range(2)]
+    groups = group(five + three + alphabet + long + two)
     compared = compared_groups(groups)
-    assert list(compared) == ["DiscreteArrows-v0", "DiscreteAlphabet-v0"]
+    assert list(compared) == ["DiscreteArrows-v0", "DiscreteAlphabet-v0", "ContinuousAlphabet-v0"]
     assert [(algo, len(runs)) for algo, _, runs in compared["DiscreteArrows-v0"]] == [("dqn", 5)]
+    assert [(algo, len(runs)) for algo, _, runs in compared["ContinuousAlphabet-v0"]] == [("td3", 3)]
     assert plot_by_task(groups, tmp_path / "by_task.png").read_bytes()[:4] == b"\x89PNG"
     assert plot_by_task(group(three), tmp_path / "none.png") is None  # an ablation alone: no figure
     assert not (tmp_path / "none.png").exists()

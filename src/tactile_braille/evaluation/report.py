@@ -672,15 +672,21 @@ def _run_line(record: RunRecord) -> str:
 
 
 COMPARED_SEEDS = 5
-"""Seeds a group needs to be drawn in :func:`plot_by_task`: the paper's, and the benchmark's rows'."""
+"""Seeds a group needs to be drawn in :func:`plot_by_task`: the paper's, and the benchmark's rows'
+(fewer on a task of :data:`TABLE3_SHORT_ROWS`: the seeds its rows ask)."""
+
+
+def compared_seeds(task: str) -> int:
+    """Seeds a group of ``task`` needs to be drawn in :func:`plot_by_task`."""
+    return min(COMPARED_SEEDS, TABLE3_SHORT_ROWS.get(task, (COMPARED_SEEDS,))[0])
 
 
 def compared_groups(groups: dict[tuple[str, str, str], list[RunRecord]]) -> dict[str, list[tuple]]:
     """Task -> [(algo, variant, records)] of the groups :func:`plot_by_task` draws: those with at least
-    :data:`COMPARED_SEEDS` seeds, in the groups' order."""
+    :func:`compared_seeds` seeds, in the groups' order."""
     tasks: dict[str, list[tuple]] = {}
     for (task, algo, variant), records in groups.items():
-        if len(records) >= COMPARED_SEEDS:
+        if len(records) >= compared_seeds(task):
             tasks.setdefault(task, []).append((algo, variant, records))
     return tasks
 
@@ -722,7 +728,7 @@ def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str 
         ax.axhline(0.95, color="grey", lw=0.6)
         ax.set_title(f"{task} (paper's convergence epochs: {', '.join(paper)})", fontsize=9)
         ax.set_xlabel("epoch (250 steps)")
-        ax.set_ylabel(f"test return, mean of {COMPARED_SEEDS}+ seeds")
+        ax.set_ylabel(f"test return, mean of {compared_seeds(task)}+ seeds")
         ax.set_ylim(-0.05, 1.05)
         ax.legend(fontsize=6.5, loc="lower right")
     for ax in axes.ravel()[len(tasks) :]:
@@ -737,8 +743,9 @@ def _by_task_section(groups: dict, figures: Path, link: str, written: set[str]) 
         return []
     written.add("by_task.png")
     return [
-        f"Each task's rows of {COMPARED_SEEDS} or more seeds side by side (means, seed ranges shaded; "
-        "dashed: the `proprio` track), over the original release's logged runs:", "",
+        f"Each task's rows of {COMPARED_SEEDS} or more seeds side by side (the continuous alphabet's of "
+        f"{compared_seeds('ContinuousAlphabet-v0')}, the seeds its Table III rows ask; means, seed ranges "
+        "shaded; dashed: the `proprio` track), over the original release's logged runs:", "",
         f"![curves by task]({link}by_task.png)", "",
     ]  # fmt: skip
 
