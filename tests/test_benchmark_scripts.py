@@ -5,10 +5,12 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
-from tactile_braille.agents import DiscreteSACConfig, DQNConfig, TrainConfig, train
+from tactile_braille.agents import DiscreteSACConfig, DQNConfig, SACConfig, TrainConfig, train
+from tactile_braille.agents.config import replace_settings
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 ARROWS = "tactile_braille/DiscreteArrows-v0"
@@ -44,3 +46,28 @@ def test_policy_critic_agreement_measures_where_the_policy_leaves_its_critics(en
     dqn = _tiny_run(env_datasets, tmp_path / "dqn", "dqn", DQNConfig(hidden=(16,), batch_size=8))
     with pytest.raises(ValueError, match="a dqn run; this compares a discrete SAC"):
         script.load_agent(dqn)
+
+
+def test_typing_edges_counts_the_moves_an_edge_stopped_and_types_in_each_world(env_datasets, tmp_path):
+    script = _load("typing_edges")
+    task = "tactile_braille/ContinuousArrows-v0"
+    env = script.EdgeCount(gym.make(task, dataset=env_datasets[task]))
+    _, info = env.reset(seed=0)
+    x = info["sensor_pose_mm"][0] - env.unwrapped.task.frame_origin_mm[0]
+    stopped = 0
+    for _ in range(6):  # six moves of 10 mm one way cross the 20 mm workspace: the last ones are stopped
+        env.step(np.array([1.0, 0.0, -1.0], dtype=np.float32))
+        stopped += x + 10.0 > 0.0 + script.CUT_MM  # the workspace ends at x = 0
+        x = min(x + 10.0, 0.0)
+    assert env.steps == 6 and env.at_edge == stopped >= 4
+    config = TrainConfig(task=task, algo="sac", epochs=1, steps_per_epoch=30, start_steps=20, threads=1,
+                         dataset=str(env_datasets[task]), agent=SACConfig(hidden=(16,), batch_size=8),
+                         evaluation={"test_episodes": 1})  # fmt: skip
+    sequences = [("UP", "LEFT"), ("RIGHT", "DOWN")]
+    rows = script.measure(train(config, run_dir=tmp_path / "ours", progress=False), sequences)
+    assert [row[0] for row in rows] == list(script.WORLDS)
+    for _, accuracy, steps, share in rows:
+        assert 0.0 <= accuracy <= 1.0 and 4 <= steps <= 4 * 25 and 0.0 <= share <= 1.0
+    released = replace_settings(config, {"edges": "overrun", "tap_depth": "released"})
+    with pytest.raises(ValueError, match="made in the released simulator's world"):
+        script.measure(train(released, run_dir=tmp_path / "released", progress=False), sequences)

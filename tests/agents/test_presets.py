@@ -40,6 +40,10 @@ def test_paper_preset_values(task, algo):
     assert (config.steps_per_epoch, config.start_steps, config.update_every) == (250, 200, 1)
     assert (config.evaluation.test_episodes, config.replay.capacity, config.replay.her) == (20, 100_000, True)
     assert config.max_episode_steps == 25
+    continuous = "Continuous" in task  # the released simulator's world
+    assert (config.edges, config.tap_depth) == (
+        ("overrun", "released") if continuous else ("stop", "commanded")
+    )
     assert isinstance(config.agent, ALGOS[algo][1])
     assert config.agent.batch_size == 32
     paper_agent = {
@@ -90,6 +94,20 @@ def test_released_preset_differs_exactly_by_the_listed_settings(task, algo):
             released_value = task_of(task).max_move_mm
         assert (paper[key], released[key]) == (paper_value, released_value), key
     assert len(preset_differences("released", task, algo)) == len(RELEASED[algo])
+
+
+@pytest.mark.parametrize("name", ["fast", "fast-tactile"])
+def test_our_presets_keep_the_rigs_world_and_a_discrete_task_refuses_the_released_one(name):
+    config = preset_config(name, CONTINUOUS_TASK, "sac")
+    assert (config.edges, config.tap_depth) == ("stop", "commanded")  # the real rig's world
+    differences = preset_differences(name, CONTINUOUS_TASK, "sac")
+    assert {"edges: 'overrun' -> 'stop'", "tap_depth: 'released' -> 'commanded'"} <= set(differences)
+    with pytest.raises(ValueError, match="edges='overrun' is the continuous braille tasks'"):
+        preset_config(name, DISCRETE_TASK, "dqn", edges="overrun")
+    with pytest.raises(ValueError, match="tap_depth='released' is the released simulator's lookup"):
+        preset_config(name, DISCRETE_TASK, "dqn", tap_depth="released")
+    with pytest.raises(ValueError, match="on the render backend"):
+        preset_config("paper", CONTINUOUS_TASK, "sac", backend="render")
 
 
 def test_released_preset_values():

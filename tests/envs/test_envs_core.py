@@ -539,6 +539,74 @@ def test_continuous_sensor_stays_in_the_workspace(env_id, backend, make):
     assert (x_low, y_low) in corners
 
 
+@pytest.mark.parametrize("env_id", CONTINUOUS_IDS)
+def test_an_overrun_edge_taps_inside_and_keeps_the_commanded_position(env_id, make):
+    """``edges="overrun"`` (the released simulator's): pushed into a corner, the taps stay at the
+    corner as with ``"stop"``, but the commanded position runs on, so the same moves back leave the
+    sensor further out than where the stopping edge's sensor returns."""
+    stopping, overrunning = make(env_id), make(env_id, edges="overrun")
+    task = stopping.unwrapped.task
+    (x_low, x_high), (y_low, y_high) = task.workspace_mm
+    origin = np.array(task.frame_origin_mm)
+    assert_same(stopping.reset(seed=3), overrunning.reset(seed=3))
+    out, back = np.array([1.0, 1.0, -1.0], dtype=np.float32), np.array([-1.0, -1.0, -1.0], dtype=np.float32)
+    pushes = int(np.ceil(max(x_high - x_low, y_high - y_low) / task.max_move_mm)) + 2
+    for _ in range(pushes):  # far enough to reach the corner and run past it
+        stop_step, overrun_step = stopping.step(out), overrunning.step(out)
+        assert_same(stop_step, overrun_step)  # the same taps while the sensor is pushed into the corner
+    np.testing.assert_allclose(overrun_step[4]["sensor_pose_mm"][:2] - origin, (x_high, y_high))
+    stop_step, overrun_step = stopping.step(back), overrunning.step(back)
+    stop_xy = stop_step[4]["sensor_pose_mm"][:2] - origin
+    overrun_xy = overrun_step[4]["sensor_pose_mm"][:2] - origin
+    np.testing.assert_allclose(stop_xy, np.array([x_high, y_high]) - task.max_move_mm)
+    assert (overrun_xy > stop_xy + 1.0).all()  # the move back first undoes the overrun
+    assert x_low <= overrun_xy[0] <= x_high and y_low <= overrun_xy[1] <= y_high  # taps stay inside
+
+
+@pytest.mark.parametrize("env_id", CONTINUOUS_IDS)
+def test_an_overrun_edge_is_kept_between_the_keys_of_a_sequence(env_id, make):
+    env = make(env_id, edges="overrun")
+    env.reset(seed=0)
+    for _ in range(12):
+        env.step(np.array([1.0, 1.0, -1.0], dtype=np.float32))
+    commanded = env.unwrapped._core.position_mm[0].copy()
+    assert (commanded > np.array(env.unwrapped.task.workspace_mm)[:, 1]).all()
+    env.reset(options={"keep_pose": True})  # typing without a reset: the sensor is where it was
+    np.testing.assert_array_equal(env.unwrapped._core.position_mm[0], commanded)
+    env.reset()  # a new episode starts inside the workspace
+    assert (env.unwrapped._core.position_mm[0] <= np.array(env.unwrapped.task.workspace_mm)[:, 1]).all()
+
+
+@pytest.mark.parametrize("env_id", CONTINUOUS_IDS)
+def test_the_released_depth_lookup_reads_the_stored_tap_2_mm_deeper(env_id, make):
+    """``tap_depth="released"``: the released simulator compared the commanded 2-8 mm with its data's
+    0-6 mm labels, so a tap reads the sample 2 mm deeper (the deepest from 6 mm on); the pose reported
+    is the commanded one."""
+    released, commanded = make(env_id, tap_depth="released"), make(env_id)
+    for seed, (depth, deeper) in enumerate([(-1.0, -1 / 3), (-2 / 3, 0.0), (1 / 3, 1.0), (1.0, 1.0)]):
+        released.reset(seed=seed)
+        commanded.reset(seed=seed)
+        move = np.array([0.3, -0.2], dtype=np.float32)
+        ours = released.step(np.array([*move, depth], dtype=np.float32))
+        theirs = commanded.step(np.array([*move, deeper], dtype=np.float32))
+        np.testing.assert_array_equal(ours[0]["observation"], theirs[0]["observation"])
+        assert (ours[1], ours[2], ours[4]["pressed_key"]) == (theirs[1], theirs[2], theirs[4]["pressed_key"])
+        np.testing.assert_allclose(ours[4]["sensor_pose_mm"][:2], theirs[4]["sensor_pose_mm"][:2])
+        assert ours[4]["sensor_pose_mm"][2] == pytest.approx(5.0 + 3.0 * depth)  # as commanded
+    with pytest.raises(ValueError, match="on the dataset backend"):
+        make(env_id, "render", tap_depth="released")
+
+
+@pytest.mark.parametrize("env_id", DISCRETE_IDS)
+def test_an_overrun_edge_is_refused_on_a_discrete_task(env_id, make):
+    with pytest.raises(ValueError, match="edges='overrun' is for the continuous tasks"):
+        make(env_id, edges="overrun")
+    with pytest.raises(ValueError, match="edges must be one of"):
+        make(env_id, edges="wrap")
+    with pytest.raises(ValueError, match="tap_depth='released' is the released simulator's lookup"):
+        make(env_id, tap_depth="released")
+
+
 @pytest.mark.parametrize("backend", SIMULATED_BACKENDS)
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_reset_goal_key_option(env_id, backend, make):

@@ -336,12 +336,14 @@ def test_different_seeds_give_different_goals(env_id, make_vec):
     assert len(set(vec.reset(seed=1)[1]["goal"].tolist())) > 1
 
 
-@pytest.mark.parametrize("env_id", ENV_IDS)
-def test_one_sub_env_matches_the_single_env(env_id, make_vec, vector_datasets):
+@pytest.mark.parametrize(
+    ("env_id", "edges"), [(i, "stop") for i in ENV_IDS] + [(i, "overrun") for i in CONTINUOUS_IDS]
+)
+def test_one_sub_env_matches_the_single_env(env_id, edges, make_vec, vector_datasets):
     """With one sub-environment and the same seed, the vector env plays exactly as the single env
-    through ``gym.make`` (reset by hand after every episode end)."""
-    vec = make_vec(env_id, num_envs=1)
-    single = gym.make(env_id, dataset=vector_datasets[env_id])
+    through ``gym.make`` (reset by hand after every episode end), with either workspace edge."""
+    vec = make_vec(env_id, num_envs=1, edges=edges)
+    single = gym.make(env_id, dataset=vector_datasets[env_id], edges=edges)
     vec_observations, _ = vec.reset(seed=21)
     observations, _ = single.reset(seed=21)
     episodes = 0

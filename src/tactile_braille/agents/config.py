@@ -35,6 +35,8 @@ from typing import Any, Literal, Union
 
 Algorithm = Literal["dqn", "sac_discrete", "sac", "td3"]
 Backend = Literal["dataset", "render", "rig"]
+Edges = Literal["stop", "overrun"]
+TapDepth = Literal["commanded", "released"]
 Precision = Literal["fp32", "bf16"]
 RelabelRule = Literal["paper", "all"]
 TouchInputs = Literal["features", "readout"]
@@ -456,6 +458,15 @@ class TrainConfig:
         frame_noise: ``(mm, degrees)``: the render backend's work frame off by an error drawn anew each
             episode, offsets within +-mm along x and y, a turn within +-degrees (domain randomisation
             against calibration errors; None: none).
+        edges: what a continuous task's workspace edge does to a move that would cross it: ``stop``
+            (the sensor stops there, as the real rig's safety limits stop the arm) or ``overrun`` (the
+            released simulator's rule, in which the paper's Table III was measured: the commanded
+            position runs on past the edge and only the tap is made inside). The discrete tasks' grid
+            edges always stop a move.
+        tap_depth: which stored depth a continuous tap reads on the dataset backend: ``commanded`` (the
+            sample at the commanded depth) or ``released`` (the released simulator's lookup, which
+            compared the commanded 2-8 mm with its data's 0-6 mm labels: every tap reads the sample
+            2 mm deeper, the deepest from 6 mm on, so shallow taps feel and press like deeper ones).
         dataset: dataset for the dataset backend: a path, or a default dataset's name
             (``grid-alphabet-6mm``...; default: the task's, cached).
         device: torch device (``cpu``, ``cuda``, ``cuda:1``...).
@@ -491,6 +502,8 @@ class TrainConfig:
     final_press: bool = False
     backend: Backend = "dataset"
     frame_noise: tuple[float, ...] | None = None
+    edges: Edges = "stop"
+    tap_depth: TapDepth = "commanded"
     dataset: str | None = None
     device: str = "cpu"
     precision: Precision = "fp32"
@@ -581,6 +594,19 @@ class TrainConfig:
             raise ValueError(
                 f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "
                 f"option keep_pose), got {self.task}"
+            )
+        if self.edges != "stop" and (task is None or not task.continuous):
+            raise ValueError(
+                f"edges={self.edges!r} is the continuous braille tasks' (a discrete move off the key "
+                f"grid stays put): set edges='stop' for {self.task}"
+            )
+        if self.tap_depth != "commanded" and (
+            task is None or not task.continuous or self.backend != "dataset"
+        ):
+            raise ValueError(
+                f"tap_depth={self.tap_depth!r} is the released simulator's lookup of the continuous "
+                f"braille tasks' stored grid: set tap_depth='commanded' for {self.task} on the "
+                f"{self.backend} backend"
             )
         if self.final_press and task is None:
             raise ValueError(f"final_press ends episodes with the braille tasks' press, got {self.task}")

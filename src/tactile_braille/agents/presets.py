@@ -7,7 +7,9 @@ once in :mod:`~tactile_braille.agents.config`):
 * ``paper`` follows the paper's Table II, taking the released code's values
   where the table is silent (Adam's epsilon 1e-4, DQN's squared-error loss,
   TD3's noise in mm): the defaults, the paper's epochs per task and its 25-step
-  episodes (:func:`paper_changes`).
+  episodes, and on the continuous tasks the released simulator's world: its
+  workspace edge, past which the commanded position runs on, and its lookup of
+  the stored depths, 2 mm deeper than commanded (:func:`paper_changes`).
 * ``released`` reproduces the configurations saved with the original runs
   (``reference/braille_rl_2020/.../config.json``): ``paper`` with
   :data:`RELEASED_CHANGES`. docs/agents.md tables the differences.
@@ -16,7 +18,9 @@ once in :mod:`~tactile_braille.agents.config`):
   transition for every goal, and more, cheaper updates on the encoder's
   readout, with the arm's pose and the goal placed on the calibrated layout
   as inputs; on the continuous alphabet also asymmetric critics that see the
-  sensor pose (:func:`fast_changes`).
+  sensor pose (:func:`fast_changes`). Both ``fast`` presets keep the real
+  rig's world: the workspace edge stops the arm, and taps read the depth
+  commanded.
 * ``fast-tactile`` is ``fast`` on the ``tactile`` track: its touch encoder
   learns from the observation dictionary alone (touch odometry, pressed keys,
   press outcomes and each key's offset learnt in hindsight from the run's
@@ -119,8 +123,13 @@ in [-1, 1] units of the task's largest move, so :func:`paper_changes` divides by
 
 def paper_changes(task: str, algo: str) -> dict[str, Any]:
     """What the paper's presets set beyond the defaults, for a task and an algorithm: its epochs and
-    25-step episodes, and TD3's noise in the units of the released code (mm)."""
+    25-step episodes, on the continuous tasks the released simulator's workspace edge and depth lookup
+    (``edges="overrun"``, ``tap_depth="released"``, since session 22), and TD3's noise in the units of
+    the released code (mm)."""
     changes: dict[str, Any] = {"epochs": PAPER_EPOCHS[family(task)], "max_episode_steps": 25}
+    if family(task)[0] == "continuous":  # the released simulator, in which Table III was measured:
+        changes["edges"] = "overrun"  # its workspace edge, past which the commanded position runs on
+        changes["tap_depth"] = "released"  # and its lookup of the stored depths, 2 mm deeper
     if algo == "td3":
         scale = task_of(task).max_move_mm
         changes["agent"] = {name: mm / scale for name, mm in TD3_NOISE_MM.items()}
@@ -208,6 +217,8 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
     changes = paper_changes(task, algo)
     if name.startswith("fast"):  # fast keeps the noise it was made with, in the actions' [-1, 1] units
         changes.pop("agent", None)
+        changes.pop("edges", None)  # and the rig's world: its workspace edge stops the arm,
+        changes.pop("tap_depth", None)  # and it taps at the depth commanded
     config = replace_settings(
         TrainConfig(task=task, algo=algo, preset=name, track=PRESET_TRACKS[name]), changes
     )

@@ -273,6 +273,10 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
         kwargs["backend"] = config.backend
         if config.frame_noise is not None:
             kwargs["frame_noise"] = config.frame_noise
+        if config.edges != "stop":
+            kwargs["edges"] = config.edges
+        if config.tap_depth != "commanded":
+            kwargs["tap_depth"] = config.tap_depth
         if config.dataset is not None:
             kwargs["dataset"] = config.dataset
         if rig is not None:

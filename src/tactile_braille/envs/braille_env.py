@@ -77,6 +77,8 @@ class BrailleEnv(gym.Env):
         render_mode: str | None = None,
         proprio: bool = False,
         frame_noise: tuple[float, float] | None = None,
+        edges: str = "stop",
+        tap_depth: str = "commanded",
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -85,7 +87,12 @@ class BrailleEnv(gym.Env):
         self.task = Task(keys=keys, continuous=self.continuous)
         self._dome_radius_mm = sensor_preset(sensor).dome_diameter_mm / 2
         self._core = BatchedBraille(
-            self.task, make_backend(self.task, backend, dataset, rig, sensor, frame_noise), 1, proprio=proprio
+            self.task,
+            make_backend(self.task, backend, dataset, rig, sensor, frame_noise),
+            1,
+            proprio=proprio,
+            edges=edges,
+            tap_depth=tap_depth,
         )
         self.observation_space = self._core.observation_space()
         self.action_space = self._core.action_space()
@@ -102,8 +109,9 @@ class BrailleEnv(gym.Env):
 
     @property
     def world(self) -> dict:
-        """Where the observations come from: backend, dataset or rig, and their parameters (JSON-ready)."""
-        return self._core.backend.describe()
+        """Where the observations come from: backend, dataset or rig, and their parameters (JSON-ready),
+        and the released simulator's rules where they apply (``edges``, ``tap_depth``)."""
+        return {**self._core.backend.describe(), **self._core.rules()}
 
     @property
     def goal_keys(self) -> tuple[str, ...]:

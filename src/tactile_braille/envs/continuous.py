@@ -62,6 +62,20 @@ class ContinuousBrailleEnv(BrailleEnv):
       within +-degrees about the task's origin; observations report the
       commanded pose. Domain randomisation against calibration errors
       (docs/evaluation.md). Default None: no error.
+    * ``edges``: what the workspace's edge does to a move that would cross it.
+      ``"stop"`` (default): the sensor stops at the edge, as the real rig's
+      safety limits (and the released robot environment) stop the arm.
+      ``"overrun"``: the released simulator's rule: the commanded position
+      runs on past the edge, the tap is made at the nearest point inside, and
+      a move back must first undo the overrun. ``info["sensor_pose_mm"]``
+      (and ``sensor_pose``) report the tap's pose either way.
+    * ``tap_depth`` (dataset backend): which stored depth a tap reads.
+      ``"commanded"`` (default): the sample at the commanded depth.
+      ``"released"``: the released simulator's lookup, which compared the
+      commanded 2-8 mm with its data's 0-6 mm depth labels: every tap
+      (the reset's too) reads the sample 2 mm deeper, the deepest from 6 mm
+      on, so shallow taps feel and press like deeper ones.
+      ``info["sensor_pose_mm"]`` reports the commanded depth either way.
 
     ``info`` holds ``is_success``, ``pressed_key``, ``sensor_pose_mm`` and ``goal_key``.
 

@@ -29,6 +29,19 @@ x, y and tap depth in mm, as the arm reports it (docs/benchmark.md)."""
 _MOVES = np.array([(-1, 0), (1, 0), (0, -1), (0, 1), (0, 0)], dtype=np.int64)
 _PRESS = DISCRETE_ACTIONS.index("PRESS")
 
+EDGES = ("stop", "overrun")
+"""What a continuous task's workspace edge does to a move that crosses it: ``"stop"``, the sensor stops
+at the edge (the real rig's safety limits, the released robot environment); ``"overrun"``, the released
+simulator's: the commanded position runs on past the edge and only the tap is made at the nearest point
+inside, so a move back must first undo the overrun."""
+
+TAP_DEPTHS = ("commanded", "released")
+"""Which stored depth a continuous tap reads on the dataset backend: ``"commanded"``, the sample at the
+commanded depth (2-8 mm: the paper's 0-6 mm plus its constant 2 mm); ``"released"``, the released
+simulator's lookup, which compares the commanded 2-8 mm with its data's 0-6 mm labels, so every tap
+reads the sample :data:`RELEASED_DEPTH_SHIFT_MM` deeper, the deepest (8 mm) from 6 mm on."""
+RELEASED_DEPTH_SHIFT_MM = 2.0
+
 
 def action_effects(previous_actions: np.ndarray, continuous: bool) -> np.ndarray:
     """What each action did, as the action space documents it, from the ``previous_action`` entries of
@@ -87,11 +100,38 @@ class BatchedBraille:
         backend: a :class:`DatasetBackend` or :class:`RigBackend`.
         n: number of environments.
         proprio: observations also carry ``sensor_pose`` (the ``proprio`` track's, :data:`PROPRIO_KEY`).
+        edges: what the workspace's edge does to a continuous move, one of :data:`EDGES` (the discrete
+            tasks' grid edges stop a move, as in the released simulator: ``"stop"`` only).
+        tap_depth: which stored depth a continuous tap reads, one of :data:`TAP_DEPTHS` (``"released"``
+            on the dataset backend only: it is a property of the released simulator's lookup).
     """
 
-    def __init__(self, task: Task, backend, n: int, proprio: bool = False) -> None:
+    def __init__(
+        self,
+        task: Task,
+        backend,
+        n: int,
+        proprio: bool = False,
+        edges: str = "stop",
+        tap_depth: str = "commanded",
+    ) -> None:
         if not isinstance(proprio, bool | np.bool_):
             raise TypeError(f"proprio must be True or False, got {proprio!r}")
+        if edges not in EDGES:
+            raise ValueError(f"edges must be one of {EDGES}, got {edges!r}")
+        if edges != "stop" and not task.continuous:
+            raise ValueError(
+                f"edges={edges!r} is for the continuous tasks: a discrete move off the key grid stays put"
+            )
+        if tap_depth not in TAP_DEPTHS:
+            raise ValueError(f"tap_depth must be one of {TAP_DEPTHS}, got {tap_depth!r}")
+        if tap_depth != "commanded" and not (task.continuous and getattr(backend, "name", None) == "dataset"):
+            raise ValueError(
+                f"tap_depth={tap_depth!r} is the released simulator's lookup of the continuous tasks' "
+                "stored grid: use it with a continuous task on the dataset backend"
+            )
+        self.edges, self.tap_depth = edges, tap_depth
+        self._depth_shift_mm = RELEASED_DEPTH_SHIFT_MM if tap_depth == "released" else 0.0
         self.task = task
         self.proprio = bool(proprio)
         self.backend = backend
@@ -123,7 +163,7 @@ class BatchedBraille:
         self.pressed_code = np.full(n, -1, dtype=np.int64)
         self.previous_action = np.zeros((n, task.action_size), dtype=np.float32)
         self.cell = np.zeros((n, 2), dtype=np.int64)  # discrete
-        self.position_mm = np.zeros((n, 2))  # continuous, work frame
+        self.position_mm = np.zeros((n, 2))  # continuous, work frame: commanded (past the edge if overrun)
         self.depth_mm = np.full(n, RESET_TAP_DEPTH_MM)
 
     # ------------------------------------------------------------ spaces
@@ -172,10 +212,24 @@ class BatchedBraille:
     def sensor_pose_mm(self) -> np.ndarray:
         """(n, 3) keyboard-frame x, y and depth of the last tap."""
         if self.task.continuous:
-            xy = self.position_mm + self._frame_origin
+            xy = self._inside(self.position_mm) + self._frame_origin
         else:
             xy = self.cell_positions_mm[self.cell[:, 0], self.cell[:, 1]]
         return np.concatenate([xy, self.depth_mm[:, None]], axis=-1)
+
+    def rules(self) -> dict[str, str]:
+        """The world's rules where they are not ours (``edges``, ``tap_depth``): part of what the
+        environment's ``world`` records, so that results from another world's rules are told apart."""
+        rules = {}
+        if self.edges != "stop":
+            rules["edges"] = self.edges
+        if self.tap_depth != "commanded":
+            rules["tap_depth"] = self.tap_depth
+        return rules
+
+    def _inside(self, position_mm: np.ndarray) -> np.ndarray:
+        """The nearest work-frame positions within the workspace (where a tap is made)."""
+        return np.minimum(np.maximum(position_mm, self._workspace_low), self._workspace_high)
 
     # ------------------------------------------------------------ resets
     def reset(self, mask: np.ndarray, rng: np.random.Generator, keep_pose: bool = False) -> None:
@@ -197,8 +251,9 @@ class BatchedBraille:
                     self._workspace_low, self._workspace_high, (len(index), 2)
                 )
             self.depth_mm[index] = RESET_TAP_DEPTH_MM
-            xy = self.position_mm[index] + self._frame_origin
-            images, _ = self.backend.continuous_taps(xy[:, 0], xy[:, 1], self.depth_mm[index], rng)
+            xy = self._inside(self.position_mm[index]) + self._frame_origin
+            depth = self.depth_mm[index] + self._depth_shift_mm
+            images, _ = self.backend.continuous_taps(xy[:, 0], xy[:, 1], depth, rng)
         else:
             if not keep_pose:
                 rows, cols = self.grid_codes.shape
@@ -250,10 +305,11 @@ class BatchedBraille:
         if self.task.continuous:
             move = self.action_to_mm(actions)
             moved = self.position_mm[index] + move[:, :2]
-            self.position_mm[index] = np.minimum(np.maximum(moved, self._workspace_low), self._workspace_high)
+            self.position_mm[index] = self._inside(moved) if self.edges == "stop" else moved
             self.depth_mm[index] = move[:, 2]
-            xy = self.position_mm[index] + self._frame_origin
-            images, pressed = self.backend.continuous_taps(xy[:, 0], xy[:, 1], move[:, 2], rng)
+            xy = self._inside(moved) + self._frame_origin
+            depth = move[:, 2] + self._depth_shift_mm  # the dataset backend reads the nearest stored depth
+            images, pressed = self.backend.continuous_taps(xy[:, 0], xy[:, 1], depth, rng)
             self.previous_action[index] = actions
         else:
             rows, cols = self.grid_codes.shape

@@ -65,6 +65,9 @@ class DiscreteBrailleEnv(BrailleEnv):
       within +-degrees about the task's origin; observations report the
       commanded pose. Domain randomisation against calibration errors
       (docs/evaluation.md). Default None: no error.
+    * ``edges``: ``"stop"`` only: a move off the key grid leaves the sensor
+      where it is, as in the released simulator (``"overrun"`` is the
+      continuous tasks').
 
     ``info`` holds ``is_success``, ``pressed_key``, ``sensor_pose_mm``
     (keyboard frame x, y, depth) and ``goal_key``. ``reset(options={"goal_key":

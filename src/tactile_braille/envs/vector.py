@@ -50,6 +50,8 @@ class VectorBrailleEnv(VectorEnv):
             the single-tap reference renderer. ``"auto"`` (the default):
             ``"cuda"`` where a GPU is, else None (on a CPU the single-tap
             renderer is the faster, and it is exact).
+        edges: the continuous tasks' workspace edge, ``"stop"`` or ``"overrun"``; tap_depth: the stored
+            depth their taps read, ``"commanded"`` or ``"released"`` (the continuous environments' docs).
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -66,6 +68,8 @@ class VectorBrailleEnv(VectorEnv):
         proprio: bool = False,
         render_device: str | None = "auto",
         frame_noise: tuple[float, float] | None = None,
+        edges: str = "stop",
+        tap_depth: str = "commanded",
     ) -> None:
         if frame_noise is not None:
             raise ValueError(
@@ -94,7 +98,9 @@ class VectorBrailleEnv(VectorEnv):
 
                 render_device = "cuda" if torch.cuda.is_available() else None
             source = RigBackend(VirtualRig(sensor=sensor), device=render_device)
-        self._core = BatchedBraille(self.task, source, num_envs, proprio=proprio)
+        self._core = BatchedBraille(
+            self.task, source, num_envs, proprio=proprio, edges=edges, tap_depth=tap_depth
+        )
         self.single_observation_space = self._core.observation_space()
         self.single_action_space = self._core.action_space()
         self.observation_space = batch_space(self.single_observation_space, num_envs)

@@ -198,8 +198,14 @@ def _describe(conditions: dict, chosen: str) -> str:
             f"{len(conditions['sequences'])} sequences, "
             f"{conditions['max_episode_steps']} steps per key at most, "
             f"start seed {conditions['start_seed']}, backend `{world.get('backend')}`, world "
-            f"{world.get('generator_version', world.get('rig'))}, tactile_braille "
+            f"{world.get('generator_version', world.get('rig'))}{_rules(world)}, tactile_braille "
             f"{conditions['project_version']}.")  # fmt: skip
+
+
+def _rules(world: dict) -> str:
+    """The released simulator's rules a world follows (``edges``, ``tap_depth``), if any."""
+    rules = [f"{name} `{world[name]}`" for name in ("edges", "tap_depth") if name in world]
+    return f" ({', '.join(rules)})" if rules else ""
 
 
 def _short(line: str, width: int = 60) -> str:
