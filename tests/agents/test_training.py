@@ -810,6 +810,22 @@ def test_transfer_evaluation_types_in_another_world_and_keeps_the_others(touch_r
     assert scored["world"]["sensor"]["name"] == "braille_331"  # the run's own sensor
 
 
+def test_a_run_in_the_released_simulators_world_keeps_its_edge_in_every_transfer_world(
+    touch_runs, monkeypatch, tmp_path
+):
+    run, _, _ = touch_runs["sac"]
+    import tactile_braille.evaluation.scoring as scoring
+
+    monkeypatch.setattr(scoring, "paper_sequences", lambda keys: paper_sequences(keys)[:1])
+    overrun = tmp_path / "overrun"
+    shutil.copytree(run, overrun)
+    (overrun / TRANSFER_FILE).unlink(missing_ok=True)
+    config = json.loads((overrun / "config.json").read_text())
+    (overrun / "config.json").write_text(json.dumps({**config, "edges": "overrun"}))
+    scored = evaluate_transfer(overrun, ["frame:+1,0,+2"])["worlds"]["frame:+1,0,+2"]
+    assert scored["world"]["edges"] == "overrun" and "tap_depth" not in scored["world"]  # a grid's lookup
+
+
 # ---------------------------------------------------------------- asymmetric critics, placed goals, readout
 def test_a_touch_run_trains_asymmetric_critics_on_the_labelled_poses(env_datasets, tmp_path):
     seen = []

@@ -107,6 +107,8 @@ def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
                   "typing_seed": seed, "worlds": {}}  # fmt: skip
     sensor = (run_world(run_dir) or {}).get("sensor", {}).get("name", "braille_331")
     options = {"max_episode_steps": config.max_episode_steps} if config.max_episode_steps else {}
+    if config.edges != "stop":  # the run's edge rule holds in every world (its depth lookup: the grid's)
+        options["edges"] = config.edges
     agent = None
     for world in chosen:
         env = world.make_env(config.task, sensor, proprio=bool(config.touch.pose_inputs), **options)
