@@ -69,6 +69,8 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = (1.0, 2.0), ["1.0", "2.0"]
         if name == "edges" and algo in ("dqn", "sac_discrete"):  # the continuous tasks' (test_config)
             value, words = "stop", ["stop"]
+        if name == "key_grid" and algo in ("sac", "td3"):  # the discrete tasks' (test_config)
+            value, words = "rig", ["rig"]
         if name == "tap_depth":  # given as its default: the released lookup needs the dataset backend
             value, words = "commanded", ["commanded"]
         if name == "taps":  # given as its default: the touch encoder reads one tap (test_config)

@@ -106,6 +106,8 @@ def test_our_presets_keep_the_rigs_world_and_a_discrete_task_refuses_the_release
         preset_config(name, DISCRETE_TASK, "dqn", edges="overrun")
     with pytest.raises(ValueError, match="tap_depth='released' is the released simulator's lookup"):
         preset_config(name, DISCRETE_TASK, "dqn", tap_depth="released")
+    with pytest.raises(ValueError, match="key_grid='released' is the discrete braille tasks' grid"):
+        preset_config(name, CONTINUOUS_TASK, "sac", key_grid="released")
     with pytest.raises(ValueError, match="on the render backend"):
         preset_config("paper", CONTINUOUS_TASK, "sac", backend="render")
 

@@ -597,6 +597,30 @@ def test_the_released_depth_lookup_reads_the_stored_tap_2_mm_deeper(env_id, make
         make(env_id, "render", tap_depth="released")
 
 
+def test_the_released_key_grid_puts_z_under_s_and_the_world_records_it(make):
+    env_id = "tactile_braille/DiscreteAlphabet-v0"
+    rig, released = make(env_id), make(env_id, key_grid="released")
+    assert "key_grid" not in rig.unwrapped.world and released.unwrapped.world["key_grid"] == "released"
+    for env, under_a, under_s in ((rig, "Z", "X"), (released, NONE_KEY, "Z")):
+        grid = env.unwrapped.task.key_grid
+        assert grid[2, 0] == under_a and grid[2, 1] == under_s
+        assert sorted(set(grid.ravel()) - {NONE_KEY}) == sorted(env.unwrapped.goal_keys)
+    # The moves follow the grid: from S, DOWN then PRESS presses Z in the released grid only.
+    for env, pressed in ((rig, "X"), (released, "Z")):
+        env.reset(seed=0)
+        env.unwrapped._core.cell[0] = (1, 1)  # S
+        env.step(DOWN)
+        *_, info = env.step(PRESS)
+        assert info["pressed_key"] == pressed
+    np.testing.assert_allclose(  # Z's cell lies at Z in both grids
+        rig.unwrapped._core.cell_positions_mm[2, 0], released.unwrapped._core.cell_positions_mm[2, 1]
+    )
+    with pytest.raises(ValueError, match="key_grid='released' is the discrete tasks'"):
+        make("tactile_braille/ContinuousArrows-v0", key_grid="released")
+    with pytest.raises(ValueError, match="key_grid must be one of"):
+        make(env_id, key_grid="qwertz")
+
+
 @pytest.mark.parametrize("env_id", DISCRETE_IDS)
 def test_an_overrun_edge_is_refused_on_a_discrete_task(env_id, make):
     with pytest.raises(ValueError, match="edges='overrun' is for the continuous tasks"):

@@ -33,13 +33,25 @@ def test_the_discrete_bound_by_hand(env_datasets):
     assert typing_bound("DiscreteArrows-v0", [("UP", "DOWN")], seed=0) == to_up + 1 + 2
 
 
-@pytest.mark.parametrize("task", DISCRETE)
-def test_a_pose_aware_script_types_the_discrete_tasks_in_exactly_the_bound(env_datasets, task):
-    env = gym.make(task, dataset=env_datasets[task])
+@pytest.mark.parametrize(
+    ("task", "grid"), [(DISCRETE[0], "rig"), (DISCRETE[1], "rig"), (DISCRETE[1], "released")]
+)
+def test_a_pose_aware_script_types_the_discrete_tasks_in_exactly_the_bound(env_datasets, task, grid):
+    env = gym.make(task, dataset=env_datasets[task], key_grid=grid)
     sequences = paper_sequences(env.unwrapped.task.keys)
     for seed in (0, 3):
         steps = type_sequences(PoseScript(env), env, sequences, seed=seed).total_steps
-        assert typing_bound(task, sequences, seed=seed, dataset=env_datasets[task]) == steps
+        assert typing_bound(task, sequences, seed=seed, dataset=env_datasets[task], grid=grid) == steps
+
+
+def test_the_released_grid_moves_z_under_s_and_the_bound_follows():
+    # The robot's grid puts Z under A, the released simulator's under S: A then Z is one move more there.
+    sequence = [("A", "Z")]
+    rig, released = (typing_bound(DISCRETE[1], sequence, seed=0, grid=grid) for grid in ("rig", "released"))
+    assert released == rig + 1
+    sequence = [("S", "Z")]
+    rig, released = (typing_bound(DISCRETE[1], sequence, seed=0, grid=grid) for grid in ("rig", "released"))
+    assert released == rig - 1
 
 
 @pytest.mark.parametrize("task", CONTINUOUS)

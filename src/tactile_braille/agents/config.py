@@ -37,6 +37,7 @@ Algorithm = Literal["dqn", "sac_discrete", "sac", "td3"]
 Backend = Literal["dataset", "render", "rig"]
 Edges = Literal["stop", "overrun"]
 TapDepth = Literal["commanded", "released"]
+KeyGrid = Literal["rig", "released"]
 Precision = Literal["fp32", "bf16"]
 RelabelRule = Literal["paper", "all"]
 TouchInputs = Literal["features", "readout"]
@@ -467,6 +468,9 @@ class TrainConfig:
             sample at the commanded depth) or ``released`` (the released simulator's lookup, which
             compared the commanded 2-8 mm with its data's 0-6 mm labels: every tap reads the sample
             2 mm deeper, the deepest from 6 mm on, so shallow taps feel and press like deeper ones).
+        key_grid: the discrete tasks' key grid: ``rig`` (the original robot's: the alphabet's third row
+            starts under A) or ``released`` (the released simulator's: that row one column right, Z
+            under S; the arrows' grid is the same in both).
         dataset: dataset for the dataset backend: a path, or a default dataset's name
             (``grid-alphabet-6mm``...; default: the task's, cached).
         device: torch device (``cpu``, ``cuda``, ``cuda:1``...).
@@ -504,6 +508,7 @@ class TrainConfig:
     frame_noise: tuple[float, ...] | None = None
     edges: Edges = "stop"
     tap_depth: TapDepth = "commanded"
+    key_grid: KeyGrid = "rig"
     dataset: str | None = None
     device: str = "cpu"
     precision: Precision = "fp32"
@@ -607,6 +612,11 @@ class TrainConfig:
                 f"tap_depth={self.tap_depth!r} is the released simulator's lookup of the continuous "
                 f"braille tasks' stored grid: set tap_depth='commanded' for {self.task} on the "
                 f"{self.backend} backend"
+            )
+        if self.key_grid != "rig" and (task is None or task.continuous):
+            raise ValueError(
+                f"key_grid={self.key_grid!r} is the discrete braille tasks' grid: set key_grid='rig' "
+                f"for {self.task}"
             )
         if self.final_press and task is None:
             raise ValueError(f"final_press ends episodes with the braille tasks' press, got {self.task}")

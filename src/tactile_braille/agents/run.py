@@ -254,8 +254,8 @@ INIT_FILE = "init.json"
 """What a warm-started run (``init_from``) took from its source run."""
 INIT_FREE = (
     "seed", "epochs", "steps_per_epoch", "start_steps", "update_after", "backend", "frame_noise", "edges",
-    "tap_depth", "dataset", "device", "precision", "threads", "checkpoint_every", "init_from", "preset",
-    "replay.", "evaluation.",
+    "tap_depth", "key_grid", "dataset", "device", "precision", "threads", "checkpoint_every", "init_from",
+    "preset", "replay.", "evaluation.",
 )  # fmt: skip
 """Settings in which a warm-started run may differ from its source (names ending in a dot: a whole
 group): where it learns and for how long; the learner itself (task, algorithm, networks, touch

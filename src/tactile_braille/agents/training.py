@@ -277,6 +277,8 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
             kwargs["edges"] = config.edges
         if config.tap_depth != "commanded":
             kwargs["tap_depth"] = config.tap_depth
+        if config.key_grid != "rig":
+            kwargs["key_grid"] = config.key_grid
         if config.dataset is not None:
             kwargs["dataset"] = config.dataset
         if rig is not None:

@@ -79,12 +79,13 @@ class BrailleEnv(gym.Env):
         frame_noise: tuple[float, float] | None = None,
         edges: str = "stop",
         tap_depth: str = "commanded",
+        key_grid: str = "rig",
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
-        self.task = Task(keys=keys, continuous=self.continuous)
+        self.task = Task(keys=keys, continuous=self.continuous, grid=key_grid)
         self._dome_radius_mm = sensor_preset(sensor).dome_diameter_mm / 2
         self._core = BatchedBraille(
             self.task,
@@ -110,7 +111,7 @@ class BrailleEnv(gym.Env):
     @property
     def world(self) -> dict:
         """Where the observations come from: backend, dataset or rig, and their parameters (JSON-ready),
-        and the released simulator's rules where they apply (``edges``, ``tap_depth``)."""
+        and the released simulator's rules where they apply (``edges``, ``tap_depth``, ``key_grid``)."""
         return {**self._core.backend.describe(), **self._core.rules()}
 
     @property

@@ -82,10 +82,11 @@ def cell_positions_mm(task: Task, layout: KeyboardLayout) -> np.ndarray:
             for c in range(grid.shape[1]):
                 positions[r, c] = (xs[r], ys[c])
         return positions
-    for r in range(3):
-        x0, y0 = layout.centre_mm(grid[r, 0])
+    for r in range(3):  # each row spaced from its first key (the released grid's third row starts off it)
+        first = next(c for c in range(grid.shape[1]) if grid[r, c] != NONE_KEY)
+        x0, y0 = layout.centre_mm(grid[r, first])
         for c in range(grid.shape[1]):
-            positions[r, c] = (x0, y0 - c * pitch)
+            positions[r, c] = (x0, y0 - (c - first) * pitch)
     x_space, y_space = layout.centre_mm("SPACE")
     for c in range(grid.shape[1]):
         positions[3, c] = (x_space, y_space - (c - (grid.shape[1] - 1) / 2) * pitch)
@@ -218,13 +219,16 @@ class BatchedBraille:
         return np.concatenate([xy, self.depth_mm[:, None]], axis=-1)
 
     def rules(self) -> dict[str, str]:
-        """The world's rules where they are not ours (``edges``, ``tap_depth``): part of what the
-        environment's ``world`` records, so that results from another world's rules are told apart."""
+        """The world's rules where they are not ours (``edges``, ``tap_depth``, ``key_grid``): part of
+        what the environment's ``world`` records, so that results from another world's rules are told
+        apart."""
         rules = {}
         if self.edges != "stop":
             rules["edges"] = self.edges
         if self.tap_depth != "commanded":
             rules["tap_depth"] = self.tap_depth
+        if self.task.grid != "rig":
+            rules["key_grid"] = self.task.grid
         return rules
 
     def _inside(self, position_mm: np.ndarray) -> np.ndarray:

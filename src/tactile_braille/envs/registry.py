@@ -1,7 +1,7 @@
 """What a registered environment id is, read from its Gymnasium spec rather than from the id's text.
 
 >>> task_of("tactile_braille/ContinuousAlphabet-v0")
-Task(keys='alphabet', continuous=True)
+Task(keys='alphabet', continuous=True, grid='rig')
 """
 
 from __future__ import annotations

@@ -39,7 +39,23 @@ KEY_GRIDS: dict[str, tuple[tuple[str, ...], ...]] = {
         (_G, _G, *(["SPACE"] * 6), _G, _G),
     ),
 }
-"""The discrete tasks' key grids (the original's): NONE cells are off the keys."""
+"""The discrete tasks' key grids (the original robot's): NONE cells are off the keys."""
+
+GRIDS = ("rig", "released")
+"""The discrete tasks' key grids by name: ``"rig"``, the original robot's (:data:`KEY_GRIDS`: the
+alphabet's third row starts under A), and ``"released"``, the released simulator's
+(:data:`RELEASED_KEY_GRIDS`: that row one column right, Z under S); the arrows' grid is the same in
+both."""
+RELEASED_KEY_GRIDS: dict[str, tuple[tuple[str, ...], ...]] = {
+    **KEY_GRIDS,
+    "alphabet": (
+        tuple("QWERTYUIOP"),
+        (*"ASDFGHJKL", _G),
+        (_G, *"ZXCVBNM", _G, _G),
+        (_G, _G, *(["SPACE"] * 6), _G, _G),
+    ),
+}
+"""The released simulator's key grids (``envs/sim/disc_sim_braille_env/mock_kb.py``)."""
 
 
 @dataclass(frozen=True)
@@ -49,14 +65,22 @@ class Task:
     Attributes:
         keys: key set name (``"arrows"`` or ``"alphabet"``).
         continuous: continuous (dx, dy, depth) actions instead of grid moves.
+        grid: the discrete tasks' key grid, one of :data:`GRIDS` (``"rig"``: the robot's).
     """
 
     keys: str
     continuous: bool
+    grid: str = "rig"
 
     def __post_init__(self) -> None:
         if self.keys not in KEY_GRIDS:
             raise ValueError(f"keys must be one of {sorted(KEY_GRIDS)}, got {self.keys!r}")
+        if self.grid not in GRIDS:
+            raise ValueError(f"key_grid must be one of {GRIDS}, got {self.grid!r}")
+        if self.grid != "rig" and self.continuous:
+            raise ValueError(
+                f"key_grid={self.grid!r} is the discrete tasks': a continuous task moves over the keyboard"
+            )
 
     @property
     def goal_keys(self) -> tuple[str, ...]:
@@ -66,7 +90,7 @@ class Task:
     @property
     def key_grid(self) -> np.ndarray:
         """(rows, columns) array of key names of the discrete grid."""
-        return np.array(KEY_GRIDS[self.keys])
+        return np.array((RELEASED_KEY_GRIDS if self.grid == "released" else KEY_GRIDS)[self.keys])
 
     @property
     def max_move_mm(self) -> float:

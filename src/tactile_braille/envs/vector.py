@@ -51,7 +51,8 @@ class VectorBrailleEnv(VectorEnv):
             ``"cuda"`` where a GPU is, else None (on a CPU the single-tap
             renderer is the faster, and it is exact).
         edges: the continuous tasks' workspace edge, ``"stop"`` or ``"overrun"``; tap_depth: the stored
-            depth their taps read, ``"commanded"`` or ``"released"`` (the continuous environments' docs).
+            depth their taps read, ``"commanded"`` or ``"released"`` (the continuous environments' docs);
+            key_grid: the discrete tasks' key grid, ``"rig"`` or ``"released"`` (the discrete ones').
     """
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
@@ -70,6 +71,7 @@ class VectorBrailleEnv(VectorEnv):
         frame_noise: tuple[float, float] | None = None,
         edges: str = "stop",
         tap_depth: str = "commanded",
+        key_grid: str = "rig",
     ) -> None:
         if frame_noise is not None:
             raise ValueError(
@@ -83,7 +85,7 @@ class VectorBrailleEnv(VectorEnv):
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         self.num_envs = int(num_envs)
-        self.task = Task(keys=keys, continuous=self.continuous)
+        self.task = Task(keys=keys, continuous=self.continuous, grid=key_grid)
         if backend == "dataset":
             if render_device != "auto":
                 raise ValueError(

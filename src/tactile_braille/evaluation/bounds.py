@@ -68,6 +68,7 @@ def typing_bound(
     protocol: str = "paper",
     seed: int = 0,
     dataset=None,
+    grid: str = "rig",
 ) -> float:
     """The fewest steps any policy can type ``sequences`` in on ``task``'s dataset backend (module docs).
 
@@ -75,22 +76,24 @@ def typing_bound(
     typing evaluation's seed (sequence ``i`` starts from the pose that
     ``reset(seed=seed + i)`` draws). ``protocol="paper"``: for those starts;
     ``"released"``: for the starts the resets draw (continuous tasks), or the
-    expectation over uniformly random starts (discrete tasks).
+    expectation over uniformly random starts (discrete tasks). ``grid``: the discrete tasks' key grid
+    (``"rig"`` or the released simulator's, ``"released"``).
     """
     task_id = task if "/" in task else f"tactile_braille/{task}"
     spec = task_of(task_id)
     if spec is None:
         raise ValueError(f"typing_bound is for the braille tasks, got {task!r}")
+    spec = Task(spec.keys, spec.continuous, grid=grid)
     sequences = paper_sequences(spec.keys) if sequences is None else [tuple(s) for s in sequences]
     where = None if dataset is None else str(getattr(dataset, "path", dataset))
-    key = (task_id, tuple(sequences), protocol, seed, where)
+    key = (task_id, tuple(sequences), protocol, seed, where, grid)
     if key not in _BOUNDS:
         _BOUNDS[key] = _typing_bound(task_id, spec, sequences, protocol, seed, dataset)
     return _BOUNDS[key]
 
 
 _BOUNDS: dict[tuple, float] = {}
-"""Bounds computed in this process, by task, sequences, protocol, seed and dataset path."""
+"""Bounds computed in this process, by task, sequences, protocol, seed, dataset path and key grid."""
 
 
 def _typing_bound(task_id: str, spec, sequences: list[tuple[str, ...]], protocol: str, seed: int, dataset):

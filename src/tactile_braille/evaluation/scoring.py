@@ -33,7 +33,7 @@ import numpy as np
 from tactile_braille._version import __version__
 from tactile_braille.envs.core import _MOVES, _PRESS, PROPRIO_KEY
 from tactile_braille.envs.registry import task_name, task_of
-from tactile_braille.envs.tasks import KEY_GRIDS
+from tactile_braille.envs.tasks import Task
 from tactile_braille.evaluation.protocol import (
     PROTOCOLS,
     SENTENCES,
@@ -164,7 +164,7 @@ def fingerprint(conditions: dict) -> str:
 
 
 # ------------------------------------------------------------------ bound
-def touch_optimum(keys: str, sequences, protocol: str = "released") -> float:
+def touch_optimum(keys: str, sequences, protocol: str = "released", grid: str = "rig") -> float:
     """Expected fewest steps of any touch-only policy over ``sequences`` on a discrete task's key grid,
     exact over uniform random start cells.
 
@@ -175,12 +175,12 @@ def touch_optimum(keys: str, sequences, protocol: str = "released") -> float:
     """
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
-    return _touch_optimum(keys, tuple(map(tuple, sequences)), protocol)
+    return _touch_optimum(keys, tuple(map(tuple, sequences)), protocol, grid)
 
 
 @functools.lru_cache(maxsize=16)
-def _touch_optimum(keys: str, sequences: tuple, protocol: str) -> float:
-    grid = KEY_GRIDS[keys]
+def _touch_optimum(keys: str, sequences: tuple, protocol: str, grid_name: str = "rig") -> float:
+    grid = Task(keys, continuous=False, grid=grid_name).key_grid.tolist()
     rows, columns = len(grid), len(grid[0])
     cells = [(r, c) for r in range(rows) for c in range(columns)]
 
@@ -305,6 +305,7 @@ def evaluate_policy(
         )
     agent = as_agent(policy, env, task_name(task_id))
     sequences = paper_sequences(keys)
+    grid = env.unwrapped.task.grid  # the key grid the policy types on (the discrete tasks')
     bound = _bound(env, sequences, protocol, seed)
     result = type_sequences(agent, env, sequences, seed=seed, protocol=protocol)
     conditions = protocol_conditions(task_id, protocol, sequences, env.spec.max_episode_steps, seed,
@@ -315,7 +316,7 @@ def evaluate_policy(
         fingerprint=fingerprint(conditions), conditions=conditions,
         confusion={"rows": list(result.keys), "columns": list(result.columns),
                    "counts": result.confusion().tolist()},
-        touch_optimum=None if task_of(task_id).continuous else touch_optimum(keys, sequences, protocol),
+        touch_optimum=None if task_of(task_id).continuous else touch_optimum(keys, sequences, protocol, grid),
         typing_bound=bound,
     )  # fmt: skip
     if keys == "alphabet" and sentences:
@@ -334,7 +335,9 @@ def _bound(env: gym.Env, sequences, protocol: str, seed: int) -> float | None:
     if not isinstance(backend, DatasetBackend):
         return None
     try:
-        return typing_bound(env.spec.id, sequences, protocol, seed, dataset=backend.dataset)
+        return typing_bound(
+            env.spec.id, sequences, protocol, seed, dataset=backend.dataset, grid=env.unwrapped.task.grid
+        )
     except ValueError as error:  # a dataset whose grid the bound cannot follow: score without it
         warnings.warn(f"no typing bound for this evaluation: {error}", stacklevel=3)
         return None
