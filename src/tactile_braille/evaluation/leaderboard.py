@@ -158,7 +158,10 @@ _INTRO = (
     "lower bound under this protocol; a policy that presses wrong keys early can take fewer). The "
     "libraries' baselines and their budgets: [benchmark.md](benchmark.md#baselines-from-other-libraries). "
     "The paper's rows are its reported figures: its exact conditions cannot be fingerprinted, "
-    "and its steps were most likely counted with a reset per key (docs/evaluation.md)."
+    "its steps were most likely counted with a reset per key (docs/evaluation.md), and on the continuous "
+    "tasks it was measured in the released simulator's world, where the workspace's edge does not stop "
+    'the sensor and taps read 2 mm deeper (`edges="overrun"`, `tap_depth="released"`; '
+    "docs/environments.md), not the environments' default world."
 )
 
 
