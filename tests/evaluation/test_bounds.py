@@ -140,7 +140,9 @@ def test_the_bound_is_never_above_the_committed_runs_steps():
         typing = json.loads(file.read_text())
         recorded = typing.get("typing_bound")
         if "Discrete" in typing["task"]:  # cheap to compute again: no dataset needed
-            bound = typing_bound(typing["task"], seed=typing.get("typing_seed", 0))
+            config = file.parent / "config.json"  # the key grid the run typed on
+            grid = json.loads(config.read_text()).get("key_grid", "rig") if config.exists() else "rig"
+            bound = typing_bound(typing["task"], seed=typing.get("typing_seed", 0), grid=grid)
             assert recorded in (None, bound), file
         else:  # computed at the evaluation, in the world the run typed in
             bound = recorded
