@@ -25,6 +25,7 @@ import tactile_braille  # noqa: F401 - registers the environments
 from tactile_braille.agents.config import replace_settings
 from tactile_braille.agents.report import load_run
 from tactile_braille.agents.training import make_env
+from tactile_braille.envs.core import WORLD_RULES
 from tactile_braille.envs.registry import task_of
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 
@@ -60,7 +61,7 @@ def measure(run_dir: str, sequences=None) -> list[tuple[str, float, int, float]]
     """(world, accuracy, steps, share of steps at the edge) per world of :data:`WORLDS`, typing
     ``sequences`` (default: the paper's for the task)."""
     config, ours, agent = load_run(run_dir)
-    if ours.unwrapped.world.keys() & {"edges", "tap_depth"}:
+    if ours.unwrapped.world.keys() & set(WORLD_RULES):
         raise ValueError(f"{run_dir} was made in the released simulator's world; this script types "
                          "policies made in ours")  # fmt: skip
     if not task_of(config.task).continuous:

@@ -212,6 +212,20 @@ def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tm
         leaderboard_markdown([*results, ("e.json", results[1][1])])
 
 
+def test_the_leaderboard_names_the_released_simulators_rules_of_a_world(continuous, env_datasets):
+    released = gym.make(CONTINUOUS, dataset=env_datasets[CONTINUOUS], edges="overrun", tap_depth="released")
+    results = [
+        (f"{name}.json", make_result(evaluate_policy(lambda o: np.zeros(3, np.float32), CONTINUOUS, env=env,
+                                                     sentences=False), method=name, seed=0, env_steps=0))
+        for name, env in (("ours", continuous), ("released", released))
+    ]  # fmt: skip
+    assert results[0][1]["fingerprint"] != results[1][1]["fingerprint"]  # two worlds, never ranked together
+    page = leaderboard_markdown(results, reference={"ContinuousArrows-v0": results[1][1]["fingerprint"]})
+    assert "(edges `overrun`, tap_depth `released`)" in page.split("### ")[0]
+    assert 'world.edges: null -> "overrun"' not in page  # ours is apart, from the released reference:
+    assert '"overrun" -> null' in page.split("### Under other conditions")[1]
+
+
 # ---------------------------------------------------------------- the command
 POLICIES = """
 def press(observation):

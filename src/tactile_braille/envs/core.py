@@ -41,6 +41,8 @@ commanded depth (2-8 mm: the paper's 0-6 mm plus its constant 2 mm); ``"released
 simulator's lookup, which compares the commanded 2-8 mm with its data's 0-6 mm labels, so every tap
 reads the sample :data:`RELEASED_DEPTH_SHIFT_MM` deeper, the deepest (8 mm) from 6 mm on."""
 RELEASED_DEPTH_SHIFT_MM = 2.0
+WORLD_RULES = ("edges", "tap_depth", "key_grid")
+"""The rules in which a world may depart from ours (the released simulator's), as ``world`` records them."""
 
 
 def action_effects(previous_actions: np.ndarray, continuous: bool) -> np.ndarray:

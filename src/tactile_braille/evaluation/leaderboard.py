@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_braille.agents.run import json_differences
+from tactile_braille.envs.core import WORLD_RULES
 from tactile_braille.evaluation.report import PAPER_TABLE, TASK_NAMES, TRACK_TITLES
 from tactile_braille.evaluation.results import read_result
 
@@ -206,8 +207,8 @@ def _describe(conditions: dict, chosen: str) -> str:
 
 
 def _rules(world: dict) -> str:
-    """The released simulator's rules a world follows (``edges``, ``tap_depth``), if any."""
-    rules = [f"{name} `{world[name]}`" for name in ("edges", "tap_depth") if name in world]
+    """The released simulator's rules a world follows (:data:`~tactile_braille.envs.core.WORLD_RULES`)."""
+    rules = [f"{name} `{world[name]}`" for name in WORLD_RULES if name in world]
     return f" ({', '.join(rules)})" if rules else ""
 
 
