@@ -71,3 +71,30 @@ def test_typing_edges_counts_the_moves_an_edge_stopped_and_types_in_each_world(e
     released = replace_settings(config, {"edges": "overrun", "tap_depth": "released"})
     with pytest.raises(ValueError, match="made in the released simulator's world"):
         script.measure(train(released, run_dir=tmp_path / "released", progress=False), sequences)
+
+
+def test_typing_overrun_measures_how_far_out_each_key_starts_and_splits_keys_by_it(env_datasets, tmp_path):
+    script = _load("typing_overrun")
+    task = "tactile_braille/ContinuousArrows-v0"
+    env = script.StartOverrun(gym.make(task, dataset=env_datasets[task], edges="overrun"))
+    _, info = env.reset(seed=0)
+    x = info["sensor_pose_mm"][0] - env.unwrapped.task.frame_origin_mm[0]
+    for _ in range(6):  # 60 mm one way from inside a 20 mm workspace ending at x = 0: 40-60 mm past it
+        env.step(np.array([1.0, 0.0, -1.0], dtype=np.float32))
+    env.reset(options={"goal_key": "UP", "keep_pose": True})
+    env.reset(options={"goal_key": "UP"})  # a fresh start pose is drawn inside
+    assert env.starts_mm[0] == 0.0 and env.starts_mm[1] == pytest.approx(x + 60.0) and env.starts_mm[2] == 0.0
+    config = TrainConfig(task=task, algo="sac", epochs=1, steps_per_epoch=30, start_steps=20, threads=1,
+                         dataset=str(env_datasets[task]), agent=SACConfig(hidden=(16,), batch_size=8),
+                         evaluation={"test_episodes": 1}, edges="overrun")  # fmt: skip
+    sequences = [("UP", "LEFT", "DOWN"), ("RIGHT", "DOWN", "UP")]
+    found = script.measure(train(config, run_dir=tmp_path / "overrun", progress=False), sequences)
+    assert len(found.starts_mm) == len(found.correct) == len(found.steps) == 6
+    assert found.starts_mm[0] == found.starts_mm[3] == 0.0  # each sequence starts from a fresh pose
+    assert np.all(found.starts_mm >= 0) and np.all((found.steps >= 1) & (found.steps <= 25))
+    inside, outside = found.split(False), found.split(True)
+    assert inside[0] + outside[0] == 6 and inside[0] >= 2
+    assert inside[1] == pytest.approx(found.correct[found.starts_mm < script.OUT_MM].mean())
+    stopping = replace_settings(config, {"edges": "stop"})
+    with pytest.raises(ValueError, match="made with edges='stop': every key starts inside"):
+        script.measure(train(stopping, run_dir=tmp_path / "stop", progress=False), sequences)
