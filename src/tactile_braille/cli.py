@@ -761,7 +761,8 @@ def _add_evaluate_command(commands) -> None:
         action="append",
         default=[],
         metavar="TASK=FINGERPRINT",
-        help="rank TASK's results under this fingerprint (default: the one most results hold)",
+        help="rank TASK's results under this fingerprint (default: the one most of those scored as the "
+        "registered environment comes hold: the paper's protocol, the default world)",
     )
     board.add_argument("--strict", action="store_true", help="refuse results under other conditions")
     board.set_defaults(handler=_leaderboard)

@@ -220,6 +220,11 @@ def test_the_leaderboard_names_the_released_simulators_rules_of_a_world(continuo
         for name, env in (("ours", continuous), ("released", released))
     ]  # fmt: skip
     assert results[0][1]["fingerprint"] != results[1][1]["fingerprint"]  # two worlds, never ranked together
+    # Unasked, the reference is the default world's, though the released world's seeds outnumber it.
+    more = [(f"released{seed}.json", {**results[1][1], "seed": seed}) for seed in (1, 2)]
+    page = leaderboard_markdown([*results, *more])
+    assert "| 1 | ours | tactile | 1 |" in page.split("### Under other conditions")[0]
+    assert "| released | tactile | 3 |" in page.split("### Under other conditions")[1]
     page = leaderboard_markdown(results, reference={"ContinuousArrows-v0": results[1][1]["fingerprint"]})
     assert "(edges `overrun`, tap_depth `released`)" in page.split("### ")[0]
     assert 'world.edges: null -> "overrun"' not in page  # ours is apart, from the released reference:

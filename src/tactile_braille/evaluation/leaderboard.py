@@ -5,9 +5,13 @@ RESULTS are results files (docs/benchmark.md) or run folders and archived
 records (their ``result.json``, or one made from their typing evaluation).
 Per task, results are grouped by method, track, fingerprint and training
 budget (their seeds averaged), and ranked by typing accuracy, then by typing steps. A task's
-reference fingerprint is the one most of its results hold (or the one
-given); results under other conditions are listed apart with what differs,
-never ranked with the rest (or refused, with ``strict``).
+reference fingerprint (or the one given) is the one most of its results
+hold among those scored as its registered environment comes: the paper's
+protocol, in the default world (none of the released simulator's rules,
+:data:`~tactile_braille.envs.core.WORLD_RULES`). A reproduction in the
+released simulator's world, however many its runs, never moves the
+reference. Results under other conditions are listed apart with what
+differs, never ranked with the rest (or refused, with ``strict``).
 """
 
 from __future__ import annotations
@@ -102,6 +106,16 @@ def _references(given: dict[str, str], results) -> dict[str, str]:
     return resolved
 
 
+def _default_reference(results, task: str) -> str:
+    """The fingerprint most of ``task``'s results hold among those scored as the registered environment
+    comes (the paper's protocol, the default world); of all its results where none was."""
+    held = [r for _, r in results if r["task"] == task]
+    default = [r for r in held if r["report"]["conditions"]["protocol"] == "paper"
+               and not any(rule in r["report"]["conditions"]["world"] for rule in WORLD_RULES)]  # fmt: skip
+    counts = Counter(r["fingerprint"] for r in default or held)
+    return min(counts, key=lambda f: (-counts[f], f))
+
+
 def _conditions(results, task: str) -> dict[str, dict]:
     return {r["fingerprint"]: r["report"]["conditions"] for _, r in results if r["task"] == task}
 
@@ -119,8 +133,7 @@ def leaderboard_markdown(
     order = [*TASK_NAMES, *sorted(set(per_task) - set(TASK_NAMES))]
     lines = [f"# {title}", "", _INTRO, ""]
     for task in (t for t in order if t in per_task):
-        counts = Counter(f for _, r in results if r["task"] == task for f in [r["fingerprint"]])
-        chosen = reference.get(task) or min(counts, key=lambda f: (-counts[f], f))
+        chosen = reference.get(task) or _default_reference(results, task)
         apart = [row for row in per_task[task] if row.fingerprint != chosen]
         if strict and apart:
             where = next(w for w, r in results if r["task"] == task and r["fingerprint"] != chosen)
