@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import os
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from conftest_datasets import FaultyRig, assert_same_arrays, cache_module, collect, collect_module
+from tactile_braille._io import LockedError, exclusive_lock
 from tactile_braille.datasets.cache import data_dir, default_dataset, default_dataset_path
 from tactile_braille.datasets.procedures import PerturbedTaps
-from tactile_braille.datasets.store import DatasetError, load_dataset
+from tactile_braille.datasets.store import DatasetError, load_dataset, partial_path
 from tactile_braille.rigs.base import RigError
 from tactile_braille.rigs.virtual import VirtualRig
 
@@ -193,6 +196,98 @@ def test_stale_interrupted_generation_is_regenerated(cache, monkeypatch, capsys)
     assert len(dataset) == len(TINY)
     np.testing.assert_array_equal(dataset.tap_index, np.arange(len(TINY)))
     assert not partial.exists()
+
+
+class _Holder:
+    """Another writer: holds the tiny dataset's generation lock in a thread until told to let go."""
+
+    def __init__(self):
+        self.holding, self.let_go, self.released = threading.Event(), threading.Event(), False
+        lock = partial_path(default_dataset_path("tiny")) / ".lock"
+        self.thread = threading.Thread(target=self._hold, args=(lock,), daemon=True)
+        self.thread.start()
+        assert self.holding.wait(10)
+
+    def _hold(self, lock):
+        with exclusive_lock(lock, f"the dataset {default_dataset_path('tiny')}"):
+            self.holding.set()
+            self.let_go.wait(10)
+            self.released = True
+
+    def release(self):
+        self.let_go.set()
+        self.thread.join(10)
+
+
+def test_a_generation_in_progress_elsewhere_is_waited_for_not_failed(cache, monkeypatch, capsys):
+    # Two runs started side by side on a fresh cache: the second waits for the first's generation.
+    monkeypatch.setattr(cache_module, "_LOCK_POLL_S", 0.01)
+    holder = _Holder()
+    attempts = []
+    real_collect = cache_module.collect
+
+    def spy(*args, **kwargs):
+        if len(attempts) == 2:
+            holder.release()  # the other writer ends (here without a file: it died, say)
+        attempts.append(holder.released)
+        return real_collect(*args, **kwargs)
+
+    monkeypatch.setattr(cache_module, "collect", spy)
+    dataset = default_dataset("tiny", progress=False)
+    assert attempts == [False, False, True]  # refused twice, then generated
+    assert len(dataset) == len(TINY)
+    err = capsys.readouterr().err
+    assert err.count("waiting for it") == 1
+    assert f"the dataset {default_dataset_path('tiny')} is being written by process {os.getpid()}" in err
+    assert not partial_path(default_dataset_path("tiny")).exists()
+
+
+def test_the_wait_for_another_generation_is_bounded(cache, monkeypatch):
+    monkeypatch.setattr(cache_module, "_LOCK_POLL_S", 0.01)
+    holder = _Holder()
+    try:
+        with pytest.raises(LockedError, match=r"being written by process \d+.*\(waited 0.05 s for it\)"):
+            default_dataset("tiny", progress=False, wait_s=0.05)
+        assert not default_dataset_path("tiny").exists()
+    finally:
+        holder.release()
+
+
+@pytest.mark.parametrize("wait_s", [-1.0, float("nan")])
+def test_a_wait_that_is_not_a_duration_is_refused_before_anything_is_written(cache, wait_s):
+    with pytest.raises(ValueError, match="wait_s must be a number of seconds >= 0"):
+        default_dataset("tiny", progress=False, wait_s=wait_s)
+    assert not cache.exists()
+
+
+def test_side_by_side_generations_make_one_file_and_both_load_it(cache, monkeypatch):
+    monkeypatch.setattr(cache_module, "_LOCK_POLL_S", 0.01)
+    taps = []
+
+    class SlowRig(VirtualRig):
+        def tap(self, *args, **kwargs):
+            taps.append(threading.get_ident())
+            time.sleep(0.02)  # long enough that the second caller finds the first one writing
+            return super().tap(*args, **kwargs)
+
+    monkeypatch.setattr(cache_module, "VirtualRig", SlowRig)
+    results, errors = [], []
+
+    def load():
+        try:
+            results.append(default_dataset("tiny", progress=False))
+        except BaseException as error:  # noqa: BLE001 - reported by the assertion below
+            errors.append(error)
+
+    threads = [threading.Thread(target=load) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    assert errors == [] and len(results) == 2
+    assert len(taps) == len(TINY)  # one generation, not two
+    assert_same_arrays(results[0], results[1])
+    assert sorted(p.name for p in cache.iterdir()) == [default_dataset_path("tiny").name]
 
 
 def test_an_environment_takes_a_default_dataset_by_name(cache):

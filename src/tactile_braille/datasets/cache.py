@@ -12,8 +12,10 @@ import dataclasses
 import os
 import shutil
 import sys
+import time
 from pathlib import Path
 
+from tactile_braille._io import LockedError
 from tactile_braille.datasets.collector import GENERATOR_VERSION, collect, dataset_metadata
 from tactile_braille.datasets.procedures import SPLIT_SEED_OFFSET, GridTaps, PerturbedTaps, Procedure
 from tactile_braille.datasets.store import (
@@ -55,14 +57,49 @@ def default_dataset_path(name: str, sensor: str = "braille_331", seed: int = 0) 
 
 
 def default_dataset(
-    name: str, sensor: str = "braille_331", seed: int = 0, progress: bool = True
+    name: str,
+    sensor: str = "braille_331",
+    seed: int = 0,
+    progress: bool = True,
+    wait_s: float = 3600.0,
 ) -> TactileDataset:
     """Load the default dataset ``name``, generating it on the virtual rig if needed.
 
     Generation is deterministic from ``seed``; an interrupted generation is
-    resumed on the next call.
+    resumed on the next call. Where another process is generating it (two
+    runs started side by side on a fresh cache), this one waits for that
+    generation, up to ``wait_s`` seconds, and then loads its file (or resumes
+    it, if that process died): a ``LockedError`` only after the wait.
     """
     path = default_dataset_path(name, sensor, seed)
+    if not wait_s >= 0:
+        raise ValueError(f"wait_s must be a number of seconds >= 0, got {wait_s!r}")
+    deadline = time.monotonic() + wait_s
+    announced = False
+    while True:
+        try:
+            return _cached_or_generated(path, name, sensor, seed, progress)
+        except LockedError as error:
+            if time.monotonic() >= deadline:
+                raise LockedError(f"{error} (waited {wait_s:g} s for it)") from None
+            if not announced:
+                print(f"tactile_braille: {error}; waiting for it", file=sys.stderr)
+                announced = True
+            time.sleep(_LOCK_POLL_S)
+        except FileExistsError:
+            if not path.exists():
+                raise
+            # another process finished the file between our look and our lock: load it
+
+
+_LOCK_POLL_S = 0.5
+"""How often a process waiting for another's generation looks again."""
+
+
+def _cached_or_generated(
+    path: Path, name: str, sensor: str, seed: int, progress: bool
+) -> TactileDataset:
+    """The cached file at ``path`` if it is what ``name`` makes, else a fresh generation into it."""
     procedure = DEFAULT_DATASETS[name]
     collection_seed = seed
     if isinstance(procedure, PerturbedTaps):

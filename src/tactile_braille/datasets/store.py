@@ -238,6 +238,12 @@ class DatasetWriter:
         existed = self.partial.exists()
         self._lock = contextlib.ExitStack()  # one writer per dataset, held until finalize or exit
         self._lock.enter_context(exclusive_lock(self.partial / ".lock", f"the dataset {self.path}"))
+        if self.path.exists():  # another writer finished it while this one waited for the lock
+            with contextlib.suppress(OSError):  # our lock file, in a folder that writer removed
+                (self.partial / ".lock").unlink()
+                self.partial.rmdir()
+            self._lock.close()
+            raise FileExistsError(f"{self.path} exists already; remove it or choose another output")
         try:
             if restart and existed:  # the lock is held: no other writer is using what goes
                 for item in self.partial.iterdir():
