@@ -1,7 +1,8 @@
 """tools/lent_gpu_sweep.sh refuses bad input before it installs or runs anything.
 
-Its whole path (install the carried wheels, sweep for a budget, archive, pack) needs the wheels that
-``prepare`` downloads, so it is run by hand (docs/evaluation.md); these are its checks.
+Its whole path (install the carried wheels, sweep for a budget, archive, pack; or start, then collect)
+needs the wheels that ``prepare`` downloads, so it is run by hand (docs/evaluation.md); these are its
+checks.
 """
 
 from __future__ import annotations
@@ -33,6 +34,15 @@ def lent_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
             "BUDGET_S must be whole seconds, got 'ten'",
         ),
         (("run", "500", "results/x", "--paper"), {}, "OUT is not set"),
+        (("start", "ten", "results/x", "--paper"), {}, "BUDGET_S must be whole seconds, got 'ten'"),
+        (("collect",), {"OUT": "/tmp"}, "tools/lent_gpu_sweep.sh collect WAIT_S"),
+        (("collect", "soon"), {"OUT": "/tmp"}, "WAIT_S must be whole seconds, got 'soon'"),
+        (("collect", "10"), {"STATE": "/nonexistent/state"}, "OUT is not set"),
+        (
+            ("collect", "10"),
+            {"OUT": "/tmp", "STATE": "/nonexistent/state"},
+            "no sweep was started in /nonexistent/state: run 'start' first",
+        ),
     ],
 )
 def test_lent_gpu_sweep_refuses_bad_input_with_a_clear_message(args, env, message, tmp_path):

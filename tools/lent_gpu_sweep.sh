@@ -1,25 +1,34 @@
 #!/usr/bin/env bash
-# Part of a benchmark sweep on a lent GPU machine, inside one command (docs/evaluation.md, "On a lent
-# GPU machine"). Those machines lack gymnasium, reach no network, and are given back about 30 seconds
-# after a command ends, taking the run folders with them: so the sweep runs for a fixed budget inside
-# the command, and what comes back is the archive of the trials that finished and the epochs and
-# seconds of every trial (finished or not), the GPU wall-clock.
+# Part of a benchmark sweep on a lent GPU machine (docs/evaluation.md, "On a lent GPU machine"). Those
+# machines lack gymnasium, reach no network, and are given back about 30 seconds after a command ends,
+# taking the run folders with them: so the sweep runs for a fixed budget, and what comes back is the
+# archive of the trials that finished and the epochs and seconds of every trial (finished or not).
 #
 #   tools/lent_gpu_sweep.sh prepare
 #       here, once: the wheels the machine lacks in .whl/, the default datasets in .data/ (both ignored
 #       by git; name them in the device tool's `carry`)
 #   tools/lent_gpu_sweep.sh run BUDGET_S ARCHIVE BENCHMARK_ARGS...
-#       there: `tactile-braille benchmark BENCHMARK_ARGS --archive ARCHIVE` on CUDA (DEVICE to change),
-#       JOBS trials side by side (default 14), stopped after BUDGET_S seconds; then ARCHIVE and the
-#       sweep's log as $OUT/records.tgz, and $OUT/epochs.tsv: each trial's folder, epochs done and
-#       mean seconds an epoch. Unpack records.tgz in the repository here and commit the records.
+#       there, in one command: `tactile-braille benchmark BENCHMARK_ARGS --archive ARCHIVE` on CUDA
+#       (DEVICE to change), JOBS trials side by side (default 14), stopped after BUDGET_S seconds; then
+#       ARCHIVE and the sweep's log as $OUT/records.tgz, and $OUT/epochs.tsv: each trial's folder,
+#       epochs done and mean seconds an epoch. Unpack records.tgz here and commit the records.
+#   tools/lent_gpu_sweep.sh start BUDGET_S ARCHIVE BENCHMARK_ARGS...
+#       there, in a first command: the same sweep in a process session of its own, which outlives the
+#       command (its state in STATE, default /tmp/lent_gpu_sweep); returns after about 20 s
+#   tools/lent_gpu_sweep.sh collect WAIT_S
+#       there, in the next command, issued at once (a machine idle for 30 s is given back): waits up to
+#       WAIT_S s for the started sweep, then $OUT/records.tgz and $OUT/epochs.tsv as `run` makes them,
+#       and $OUT/progress.tgz (every trial's progress.csv); a sweep still running is left to run on
 #
 # e.g. tools/lent_gpu_sweep.sh run 500 results/table3-v2 --paper --presets released \
 #          --tasks DiscreteAlphabet-v0 --algos dqn --seeds 1 2 3 4 --precision bf16 --root runs/table3-v2
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-usage() { sed -n '2,19p' "$0" >&2; exit 2; }
+STATE=${STATE:-/tmp/lent_gpu_sweep}
+
+usage() { sed -n '2,25p' "$0" >&2; exit 2; }
+fail() { echo "$*" >&2; exit 2; }
 
 prepare() {
     local python=${PYTHON:-.venv/bin/python}
@@ -35,27 +44,26 @@ prepare() {
     du -sh .whl .data
 }
 
-run() {
-    [ $# -ge 3 ] || usage
-    local budget=$1 archive=$2
-    shift 2
-    [[ $budget =~ ^[0-9]+$ ]] || { echo "BUDGET_S must be whole seconds, got '$budget'" >&2; exit 2; }
-    [ -n "${OUT:-}" ] || { echo "OUT is not set: where should the records go?" >&2; exit 2; }
-    ls .whl/*.whl > /dev/null 2>&1 || { echo "no wheels in .whl/: run 'prepare' here and carry .whl" >&2; exit 2; }
-    [ -d .data ] || { echo "no .data/: run 'prepare' here and carry .data" >&2; exit 2; }
-    local python=${PYTHON:-python3} site=${SITE:-/tmp/site}
-    "$python" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$site" .whl/*.whl
-    export PYTHONPATH="$PWD/src:$site${PYTHONPATH:+:$PYTHONPATH}" TACTILE_BRAILLE_DATA="$PWD/.data"
+check_budget() { [[ $1 =~ ^[0-9]+$ ]] || fail "$2 must be whole seconds, got '$1'"; }
+
+# the carried wheels installed, and the environment that finds them, the package and the datasets
+setup() {
+    ls .whl/*.whl > /dev/null 2>&1 || fail "no wheels in .whl/: run 'prepare' here and carry .whl"
+    [ -d .data ] || fail "no .data/: run 'prepare' here and carry .data"
+    PYTHON=${PYTHON:-python3}
+    local site=${SITE:-/tmp/site}
+    "$PYTHON" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$site" .whl/*.whl
+    export PYTHON PYTHONPATH="$PWD/src:$site${PYTHONPATH:+:$PYTHONPATH}" TACTILE_BRAILLE_DATA="$PWD/.data"
+}
+
+root_of() {  # the benchmark's --root among its arguments
     local root=runs/paper-benchmark args=("$@") i
     for ((i = 0; i < ${#args[@]} - 1; i++)); do [ "${args[i]}" = --root ] && root=${args[i + 1]}; done
-    local status=0
-    # appended, not truncated on open: a worker's resource tracker that outlives the sweep then writes
-    # after the exit status line below, not over it
-    : > "$OUT/sweep.log"
-    timeout --kill-after=20 "$budget" "$python" -m tactile_braille.cli benchmark "$@" --archive "$archive" \
-        --device "${DEVICE:-cuda}" --threads 1 --jobs "${JOBS:-14}" --ray no >> "$OUT/sweep.log" 2>&1 || status=$?
-    echo "benchmark exit status $status (124: stopped at the budget of $budget s)" >> "$OUT/sweep.log"
-    "$python" - "$root" > "$OUT/epochs.tsv" <<'PYTHON'
+    echo "$root"
+}
+
+epochs() {  # each trial under ROOT: epochs done and mean seconds an epoch
+    "$PYTHON" - "$1" <<'PYTHON'
 import csv, sys
 from pathlib import Path
 print("trial\tepochs\tmean_epoch_s")
@@ -65,13 +73,78 @@ for progress in sorted(Path(sys.argv[1]).glob("*/*/progress.csv")) + sorted(Path
     mean = f"{sum(seconds) / len(seconds):.2f}" if seconds else "-"
     print(f"{progress.parent}\t{len(rows)}\t{mean}")
 PYTHON
+}
+
+sweep() {  # DEST BUDGET_S ARCHIVE BENCHMARK_ARGS...: the sweep, its records and epochs into DEST
+    local dest=$1 budget=$2 archive=$3
+    shift 3
+    local status=0
+    # appended, not truncated on open: a worker's resource tracker that outlives the sweep then writes
+    # after the exit status line below, not over it
+    : > "$dest/sweep.log"
+    timeout --kill-after=20 "$budget" "$PYTHON" -m tactile_braille.cli benchmark "$@" --archive "$archive" \
+        --device "${DEVICE:-cuda}" --threads 1 --jobs "${JOBS:-14}" --ray no >> "$dest/sweep.log" 2>&1 || status=$?
+    echo "benchmark exit status $status (124: stopped at the budget of $budget s)" >> "$dest/sweep.log"
+    epochs "$(root_of "$@")" > "$dest/epochs.tsv"
     mkdir -p "$archive"  # none finished: an empty archive still comes back, with the log
-    tar czf "$OUT/records.tgz" "$archive" -C "$OUT" sweep.log
+    tar czf "$dest/records.tgz" "$archive" -C "$dest" sweep.log
+    cat "$dest/epochs.tsv"
+}
+
+run() {
+    [ $# -ge 3 ] || usage
+    check_budget "$1" BUDGET_S
+    [ -n "${OUT:-}" ] || fail "OUT is not set: where should the records go?"
+    setup
+    sweep "$OUT" "$@"
+}
+
+start() {
+    [ $# -ge 3 ] || usage
+    check_budget "$1" BUDGET_S
+    if [ -f "$STATE/pid" ] && kill -0 "$(cat "$STATE/pid")" 2> /dev/null; then
+        fail "a sweep started here is still running (process $(cat "$STATE/pid")): collect it first"
+    fi
+    setup
+    rm -rf "$STATE" && mkdir -p "$STATE"
+    root_of "$@" > "$STATE/root"
+    setsid nohup bash "$0" _sweep "$STATE" "$@" > "$STATE/start.log" 2>&1 < /dev/null &
+    echo $! > "$STATE/pid"
+    sleep "${START_WAIT_S:-20}"
+    echo "sweep started (process $(cat "$STATE/pid")); its log so far:"
+    tail -c 1500 "$STATE/sweep.log" 2> /dev/null || true
+}
+
+collect() {
+    [ $# -eq 1 ] || usage
+    check_budget "$1" WAIT_S
+    [ -n "${OUT:-}" ] || fail "OUT is not set: where should the records go?"
+    [ -f "$STATE/pid" ] || fail "no sweep was started in $STATE: run 'start' first, on this same machine"
+    PYTHON=${PYTHON:-python3}
+    local pid waited=0
+    pid=$(cat "$STATE/pid")
+    while kill -0 "$pid" 2> /dev/null && [ "$waited" -lt "$1" ]; do sleep 1; waited=$((waited + 1)); done
+    local root
+    root=$(cat "$STATE/root")
+    if kill -0 "$pid" 2> /dev/null; then
+        echo "the sweep is still running after $waited s: what is done so far comes back; collect again later"
+        epochs "$root" > "$OUT/epochs.tsv"
+        cp "$STATE/sweep.log" "$OUT/" 2> /dev/null || true
+    else
+        echo "the sweep ended (waited $waited s)"
+        cp "$STATE/records.tgz" "$STATE/epochs.tsv" "$OUT/"
+    fi
+    local progress
+    progress=$(cd "$root" && find . -name progress.csv | sort)
+    [ -z "$progress" ] || (cd "$root" && tar czf "$OUT/progress.tgz" $progress)
     cat "$OUT/epochs.tsv"
 }
 
 case ${1:-} in
     prepare) prepare ;;
     run) shift; run "$@" ;;
+    start) shift; start "$@" ;;
+    collect) shift; collect "$@" ;;
+    _sweep) shift; dest=$1; shift; sweep "$dest" "$@" ;;
     *) usage ;;
 esac
