@@ -276,7 +276,7 @@ def test_side_by_side_generations_make_one_file_and_both_load_it(cache, monkeypa
     def load():
         try:
             results.append(default_dataset("tiny", progress=False))
-        except BaseException as error:  # noqa: BLE001 - reported by the assertion below
+        except BaseException as error:  # reported by the assertion below
             errors.append(error)
 
     threads = [threading.Thread(target=load) for _ in range(2)]

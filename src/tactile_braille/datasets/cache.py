@@ -96,9 +96,7 @@ _LOCK_POLL_S = 0.5
 """How often a process waiting for another's generation looks again."""
 
 
-def _cached_or_generated(
-    path: Path, name: str, sensor: str, seed: int, progress: bool
-) -> TactileDataset:
+def _cached_or_generated(path: Path, name: str, sensor: str, seed: int, progress: bool) -> TactileDataset:
     """The cached file at ``path`` if it is what ``name`` makes, else a fresh generation into it."""
     procedure = DEFAULT_DATASETS[name]
     collection_seed = seed
