@@ -134,8 +134,8 @@ collect() {
         echo "the sweep ended (waited $waited s)"
         cp "$STATE/records.tgz" "$STATE/epochs.tsv" "$OUT/"
     fi
-    local progress
-    progress=$(cd "$root" && find . -name progress.csv | sort)
+    local progress=""  # none yet where the sweep has not made its root folder
+    [ ! -d "$root" ] || progress=$(cd "$root" && find . -name progress.csv | sort)
     [ -z "$progress" ] || (cd "$root" && tar czf "$OUT/progress.tgz" $progress)
     cat "$OUT/epochs.tsv"
 }

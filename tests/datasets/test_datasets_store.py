@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -343,6 +344,31 @@ def test_one_writer_per_dataset_and_a_short_mismatch_message(tmp_path):
     again = DatasetWriter(tmp_path / "w.h5", metadata, total=2, resume=True)  # the refusal let go
     again.add(1, *_sample(1))
     assert again.finalize().exists()
+
+
+def test_a_writer_that_gets_the_lock_after_another_finished_refuses(tmp_path, monkeypatch):
+    # Two generations side by side: the second looks for the file, the first finishes it and lets go
+    # of the lock, the second takes the lock. It must refuse, not write the dataset again.
+    from tactile_braille.datasets import store as store_module
+
+    metadata = dataset_metadata(VirtualRig(seed=0), SMALL_PERTURBED, 0)
+    path = tmp_path / "w.h5"
+    real_lock = store_module.exclusive_lock
+
+    @contextlib.contextmanager
+    def lock_after_the_other_finished(*args, **kwargs):
+        monkeypatch.setattr(store_module, "exclusive_lock", real_lock)
+        first = DatasetWriter(path, metadata, total=1, shard_size=1)
+        first.add(0, *_sample(0))
+        first.finalize()
+        with real_lock(*args, **kwargs):
+            yield
+
+    monkeypatch.setattr(store_module, "exclusive_lock", lock_after_the_other_finished)
+    with pytest.raises(FileExistsError, match="exists already"):
+        DatasetWriter(path, metadata, total=1, shard_size=1)
+    assert [p.name for p in tmp_path.iterdir()] == ["w.h5"]  # no partial folder left behind
+    np.testing.assert_array_equal(load_dataset(path).observations[0], _sample(0)[0])
 
 
 # --- loading bad files ---------------------------------------------------------------------------
