@@ -155,3 +155,28 @@ def test_a_reports_command_names_a_folder_whose_every_entry_it_reports_as_folder
     assert cli._short_command(argv) == "report results/a/* results/b/x results/b/y --output 'my file.md'"
     (tmp_path / "results/a/notes.txt").write_text("not a run")  # a/* would now also name this file
     assert cli._short_command(argv[:3]) == "report results/a/x results/a/y"
+
+
+def test_sweep_takes_the_train_commands_settings_under_a_variant_name(tmp_path, monkeypatch, capsys):
+    calls = []
+    monkeypatch.setattr(cli, "_run_sweep", lambda args, trials: calls.append(trials) or 0)
+    argv = ["sweep", "--tasks", "DiscreteAlphabet-v0", "ContinuousArrows-v0", "--algos", "dqn", "sac",
+            "--seeds", "100", "--epochs", "3", "--root", str(tmp_path / "runs"),
+            "--replay.relabel", "all", "--agent.batch-size", "256"]  # fmt: skip
+    assert main(argv) == 2  # settings without a name for them
+    assert "need a --variant NAME" in capsys.readouterr().err
+    assert main([*argv, "--variant", "relabel-all_batch256"]) == 0
+    trials = calls[0]
+    assert [t.name for t in trials] == [
+        "DiscreteAlphabet-v0__dqn__relabel-all_batch256__100",
+        "ContinuousArrows-v0__sac__relabel-all_batch256__100",
+    ]
+    for trial in trials:
+        config = trial.config()
+        assert (config.epochs, config.replay.relabel, config.agent.batch_size) == (3, "all", 256)
+    assert main([*argv, "--variant", "a__b"]) == 2  # '__' separates a trial name's parts
+    assert "variant 'a__b'" in capsys.readouterr().err
+    assert main([*argv, "--variant", "eps", "--agent.epsilon-start", "0.5"]) == 2  # DQN's, not SAC's
+    assert "--agent.epsilon-start is not a setting of sac" in capsys.readouterr().err
+    assert len(calls) == 1  # nothing ran after a refusal
+    assert not (tmp_path / "runs").exists()

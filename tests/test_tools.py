@@ -34,6 +34,11 @@ def lent_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
             "BUDGET_S must be whole seconds, got 'ten'",
         ),
         (("run", "500", "results/x", "--paper"), {}, "OUT is not set"),
+        (
+            ("start", "500", "results/x", "--paper"),
+            {"COMMAND": "train"},
+            "COMMAND must be benchmark or sweep, got 'train'",
+        ),
         (("start", "ten", "results/x", "--paper"), {}, "BUDGET_S must be whole seconds, got 'ten'"),
         (("collect",), {"OUT": "/tmp"}, "tools/lent_gpu_sweep.sh collect WAIT_S"),
         (("collect", "soon"), {"OUT": "/tmp"}, "WAIT_S must be whole seconds, got 'soon'"),

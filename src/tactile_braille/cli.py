@@ -518,9 +518,16 @@ def _run_sweep(args: argparse.Namespace, trials) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from tactile_braille.cli_config import config_overrides
     from tactile_braille.sweep import plan
 
-    return _run_sweep(args, plan(args.tasks, args.algos, args.seeds, args.preset, **_sweep_overrides(args)))
+    settings = {algo: config_overrides(args, algo) for algo in args.algos}
+    if any(settings.values()) and not args.variant:
+        raise ValueError("settings that change the preset need a --variant NAME: it names the trials' "
+                         "folders, so that they are never taken for the preset's own runs")  # fmt: skip
+    trials = plan(args.tasks, args.algos, args.seeds, args.preset, variant=args.variant or "",
+                  settings=settings, **_sweep_overrides(args))  # fmt: skip
+    return _run_sweep(args, trials)
 
 
 def _benchmark(args: argparse.Namespace) -> int:
@@ -783,7 +790,9 @@ def _positive(text: str) -> int:
 
 
 def _add_sweep_command(commands) -> None:
-    """The ``sweep`` command."""
+    """The ``sweep`` command: the ``train`` command's settings apply to every trial."""
+    from tactile_braille.cli_config import add_config_options
+
     sweeper = commands.add_parser("sweep", help="train tasks x algorithms x seeds (Ray Tune when installed)")
     sweeper.add_argument(
         "--tasks", nargs="+", required=True, help="e.g. DiscreteArrows-v0 DiscreteAlphabet-v0"
@@ -793,7 +802,11 @@ def _add_sweep_command(commands) -> None:
     sweeper.add_argument("--preset", choices=TRAINING_PRESETS, default="paper")
     sweeper.add_argument("--backend", choices=[b for b in BACKENDS if b != "rig"], default=None)
     sweeper.add_argument("--report", type=Path, default=None, help="write REPORT/results.md over the runs")
+    sweeper.add_argument("--variant", default=None, metavar="NAME",
+                         help="name of the settings given below, in each trial's folder "
+                              "(TASK__ALGO__NAME__SEED); needed with any of them")  # fmt: skip
     _add_sweep_options(sweeper, "runs/sweep")
+    add_config_options(sweeper, skip=("seed", "epochs", "precision", "threads", "device", "backend"))
     sweeper.set_defaults(handler=_sweep)
 
 

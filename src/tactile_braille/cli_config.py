@@ -46,12 +46,13 @@ def field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
-def add_config_options(parser: argparse.ArgumentParser) -> None:
-    """Add an option for every setting of a training run (top-level ones, then one group each)."""
+def add_config_options(parser: argparse.ArgumentParser, skip: tuple[str, ...] = ()) -> None:
+    """Add an option for every setting of a training run (top-level ones, then one group each), but
+    the top-level ones in ``skip`` (a command that has options of its own for them)."""
     top = parser.add_argument_group("run settings (override the preset)")
     hints, docs = typing.get_type_hints(TrainConfig), field_docs(TrainConfig)
     for spec in dataclasses.fields(TrainConfig):
-        if spec.name in (*POSITIONAL, *RECORD_ONLY, "agent", *GROUPS):
+        if spec.name in (*POSITIONAL, *RECORD_ONLY, "agent", *GROUPS, *skip):
             continue
         _add_option(top, spec.name, hints[spec.name], docs.get(spec.name, ""))
     for group_name, cls in GROUPS.items():

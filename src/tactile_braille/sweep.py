@@ -30,6 +30,7 @@ import dataclasses
 import importlib.util
 import json
 import multiprocessing
+import re
 import shutil
 from collections.abc import Sequence
 from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
@@ -53,6 +54,10 @@ PAPER_SIM_RUNS = (
 """The simulated rows of the paper's Table III."""
 
 
+VARIANT_NAME = re.compile(r"[A-Za-z0-9.-]+(_[A-Za-z0-9.-]+)*")
+"""A variant's name: no '__' (the separator of a trial's name) and no path characters."""
+
+
 @dataclass(frozen=True)
 class Trial:
     """One training run of a sweep."""
@@ -62,10 +67,14 @@ class Trial:
     seed: int
     preset: str = "paper"
     overrides: dict[str, Any] = field(default_factory=dict)
+    variant: str = ""
+    """Names the overrides in the trial's folder (``{task}__{algo}__{variant}__{seed}``), so that runs
+    of a preset and of its variants can share a root and an archive."""
 
     @property
     def name(self) -> str:
-        return f"{self.task}__{self.algo}__{self.seed}"
+        middle = f"__{self.variant}" if self.variant else ""
+        return f"{self.task}__{self.algo}{middle}__{self.seed}"
 
     @property
     def env_id(self) -> str:
@@ -76,9 +85,23 @@ class Trial:
 
 
 def plan(
-    tasks: Sequence[str], algos: Sequence[str], seeds: Sequence[int], preset: str = "paper", **overrides: Any
+    tasks: Sequence[str],
+    algos: Sequence[str],
+    seeds: Sequence[int],
+    preset: str = "paper",
+    variant: str = "",
+    settings: dict[str, dict[str, Any]] | None = None,
+    **overrides: Any,
 ) -> list[Trial]:
-    """Every (task, algo, seed) whose action kinds match (DQN on discrete tasks, SAC on continuous...)."""
+    """Every (task, algo, seed) whose action kinds match (DQN on discrete tasks, SAC on continuous...).
+
+    ``overrides`` change every trial's settings, ``settings[algo]`` those of one algorithm's trials
+    (as :func:`~tactile_braille.agents.config.replace_settings` takes them); ``variant`` names them.
+    """
+    if variant and not VARIANT_NAME.fullmatch(variant):
+        raise ValueError(f"variant {variant!r}: use letters, digits, '.', '-' and single '_' (it names "
+                         "folders whose parts '__' separates)")  # fmt: skip
+    settings = settings or {}
     trials = []
     for task in tasks:
         for algo in algos:
@@ -87,7 +110,8 @@ def plan(
             spec = task_of(Trial(task, algo, 0).env_id)
             if spec is not None and spec.continuous != (algo in CONTINUOUS_ALGORITHMS):
                 continue
-            trials.extend(Trial(task, algo, seed, preset, dict(overrides)) for seed in seeds)
+            changes = {**overrides, **settings.get(algo, {})}
+            trials.extend(Trial(task, algo, seed, preset, changes, variant) for seed in seeds)
     if not trials:
         raise ValueError(f"no algorithm of {list(algos)} acts in the tasks {list(tasks)}")
     for trial in trials:
