@@ -64,7 +64,7 @@ ALL_RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json re
 RECORDS = $(filter-out results/tuning/% results/diagnostics/% results/transfer/% results/warm-start/%,$(ALL_RECORDS))
 TRANSFER = $(filter results/transfer/%,$(ALL_RECORDS))
 WARM = $(filter results/warm-start/%,$(ALL_RECORDS))
-# results/ablation-*/ hold ablations (a preset with one part taken away): tabled, not ranked.
+# results/ablation-*/ hold ablations (a preset with one part taken away or changed): tabled, not ranked.
 RANKED = $(filter-out results/ablation-%,$(RECORDS))
 RESULT_FILES = $(sort $(wildcard results/leaderboard/*/*.json))
 results: $(STAMP)
