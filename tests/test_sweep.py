@@ -38,6 +38,21 @@ def test_plan_pairs_algorithms_with_matching_tasks():
         plan(["DiscreteArrows-v0"], ["dqn"], [0], epochs=0)  # bad settings fail before any trial
 
 
+def test_plan_names_a_variant_and_gives_each_algorithm_its_settings():
+    trials = plan(["DiscreteArrows-v0", "ContinuousArrows-v0"], ["dqn", "sac"], [7], variant="relabel-all_b64",
+                  settings={"dqn": {"agent": {"batch_size": 64}}}, replay={"relabel": "all"})  # fmt: skip
+    assert [t.name for t in trials] == [
+        "DiscreteArrows-v0__dqn__relabel-all_b64__7",
+        "ContinuousArrows-v0__sac__relabel-all_b64__7",
+    ]
+    dqn, sac = (t.config() for t in trials)
+    assert (dqn.agent.batch_size, dqn.replay.relabel) == (64, "all")
+    assert sac.replay.relabel == "all" and sac.agent.batch_size != 64  # the DQN's setting only
+    for bad in ("a__b", "a/b", "_a", "a b"):
+        with pytest.raises(ValueError, match="variant"):
+            plan(["DiscreteArrows-v0"], ["dqn"], [0], variant=bad)
+
+
 def test_sequential_sweep_is_resumable_and_retries(env_datasets, tmp_path, monkeypatch):
     dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
     trials = plan(["DiscreteArrows-v0"], ["dqn"], [0, 1], dataset=dataset, **TINY)
