@@ -39,8 +39,9 @@ def test_plan_pairs_algorithms_with_matching_tasks():
 
 
 def test_plan_names_a_variant_and_gives_each_algorithm_its_settings():
-    trials = plan(["DiscreteArrows-v0", "ContinuousArrows-v0"], ["dqn", "sac"], [7], variant="relabel-all_b64",
-                  settings={"dqn": {"agent": {"batch_size": 64}}}, replay={"relabel": "all"})  # fmt: skip
+    settings = {"dqn": {"agent": {"batch_size": 64}}}
+    trials = plan(["DiscreteArrows-v0", "ContinuousArrows-v0"], ["dqn", "sac"], [7],
+                  variant="relabel-all_b64", settings=settings, replay={"relabel": "all"})  # fmt: skip
     assert [t.name for t in trials] == [
         "DiscreteArrows-v0__dqn__relabel-all_b64__7",
         "ContinuousArrows-v0__sac__relabel-all_b64__7",
