@@ -41,13 +41,14 @@ def test_plan_pairs_algorithms_with_matching_tasks():
 def test_plan_names_a_variant_and_gives_each_algorithm_its_settings():
     settings = {"dqn": {"agent": {"batch_size": 64}}}
     trials = plan(["DiscreteArrows-v0", "ContinuousArrows-v0"], ["dqn", "sac"], [7],
-                  variant="relabel-all_b64", settings=settings, replay={"relabel": "all"})  # fmt: skip
+                  variant="relabel-all_b64", settings=settings, replay={"relabel": "all"},
+                  agent={"gamma": 0.9})  # fmt: skip
     assert [t.name for t in trials] == [
         "DiscreteArrows-v0__dqn__relabel-all_b64__7",
         "ContinuousArrows-v0__sac__relabel-all_b64__7",
     ]
     dqn, sac = (t.config() for t in trials)
-    assert (dqn.agent.batch_size, dqn.replay.relabel) == (64, "all")
+    assert (dqn.agent.batch_size, dqn.agent.gamma, dqn.replay.relabel) == (64, 0.9, "all")  # groups merged
     assert sac.replay.relabel == "all" and sac.agent.batch_size != 64  # the DQN's setting only
     for bad in ("a__b", "a/b", "_a", "a b"):
         with pytest.raises(ValueError, match="variant"):

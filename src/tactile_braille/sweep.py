@@ -110,7 +110,10 @@ def plan(
             spec = task_of(Trial(task, algo, 0).env_id)
             if spec is not None and spec.continuous != (algo in CONTINUOUS_ALGORITHMS):
                 continue
-            changes = {**overrides, **settings.get(algo, {})}
+            changes = dict(overrides)
+            for name, value in settings.get(algo, {}).items():  # a group's settings join the group's
+                both = isinstance(value, dict) and isinstance(changes.get(name), dict)
+                changes[name] = {**changes[name], **value} if both else value
             trials.extend(Trial(task, algo, seed, preset, changes, variant) for seed in seeds)
     if not trials:
         raise ValueError(f"no algorithm of {list(algos)} acts in the tasks {list(tasks)}")
