@@ -178,5 +178,11 @@ def test_sweep_takes_the_train_commands_settings_under_a_variant_name(tmp_path, 
     assert "variant 'a__b'" in capsys.readouterr().err
     assert main([*argv, "--variant", "eps", "--agent.epsilon-start", "0.5"]) == 2  # DQN's, not SAC's
     assert "--agent.epsilon-start is not a setting of sac" in capsys.readouterr().err
+    assert main([*argv[:13], "--variant", "same"]) == 2  # a name for no change: the preset's runs again
+    assert "--variant same names no setting" in capsys.readouterr().err
+    assert main([*argv[:13], "--dataset", "grid.h5"]) == 0  # where a run is made, not what it is
+    assert len(calls) == 2 and calls[1][0].name == "DiscreteAlphabet-v0__dqn__100"
+    assert calls[1][0].config().dataset == "grid.h5"
+    calls.pop()
     assert len(calls) == 1  # nothing ran after a refusal
     assert not (tmp_path / "runs").exists()

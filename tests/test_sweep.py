@@ -50,7 +50,7 @@ def test_plan_names_a_variant_and_gives_each_algorithm_its_settings():
     dqn, sac = (t.config() for t in trials)
     assert (dqn.agent.batch_size, dqn.agent.gamma, dqn.replay.relabel) == (64, 0.9, "all")  # groups merged
     assert sac.replay.relabel == "all" and sac.agent.batch_size != 64  # the DQN's setting only
-    for bad in ("a__b", "a/b", "_a", "a b"):
+    for bad in ("a__b", "a/b", "_a", "a b", "..", "-x"):
         with pytest.raises(ValueError, match="variant"):
             plan(["DiscreteArrows-v0"], ["dqn"], [0], variant=bad)
 

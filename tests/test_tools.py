@@ -36,8 +36,8 @@ def lent_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
         (("run", "500", "results/x", "--paper"), {}, "OUT is not set"),
         (
             ("start", "500", "results/x", "--paper"),
-            {"COMMAND": "train"},
-            "COMMAND must be benchmark or sweep, got 'train'",
+            {"SWEEP_COMMAND": "train"},
+            "SWEEP_COMMAND must be benchmark or sweep, got 'train'",
         ),
         (("start", "ten", "results/x", "--paper"), {}, "BUDGET_S must be whole seconds, got 'ten'"),
         (("collect",), {"OUT": "/tmp"}, "tools/lent_gpu_sweep.sh collect WAIT_S"),

@@ -20,8 +20,8 @@
 #       WAIT_S s for the started sweep, then $OUT/records.tgz and $OUT/epochs.tsv as `run` makes them,
 #       and $OUT/progress.tgz (every trial's progress.csv); a sweep still running is left to run on
 #
-# COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its settings
-# and --variant NAME among the arguments).
+# SWEEP_COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its
+# settings and --variant NAME among the arguments).
 #
 # e.g. tools/lent_gpu_sweep.sh run 500 results/table3-v2 --paper --presets released \
 #          --tasks DiscreteAlphabet-v0 --algos dqn --seeds 1 2 3 4 --precision bf16 --root runs/table3-v2
@@ -29,7 +29,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 STATE=${STATE:-/tmp/lent_gpu_sweep}
-COMMAND=${COMMAND:-benchmark}
+SWEEP_COMMAND=${SWEEP_COMMAND:-benchmark}
 
 usage() { sed -n '2,27p' "$0" >&2; exit 2; }
 fail() { echo "$*" >&2; exit 2; }
@@ -49,7 +49,9 @@ prepare() {
 }
 
 check_budget() { [[ $1 =~ ^[0-9]+$ ]] || fail "$2 must be whole seconds, got '$1'"; }
-check_command() { [[ $COMMAND =~ ^(benchmark|sweep)$ ]] || fail "COMMAND must be benchmark or sweep, got '$COMMAND'"; }
+check_command() {
+    [[ $SWEEP_COMMAND =~ ^(benchmark|sweep)$ ]] || fail "SWEEP_COMMAND must be benchmark or sweep, got '$SWEEP_COMMAND'"
+}
 
 # the carried wheels installed, and the environment that finds them, the package and the datasets
 setup() {
@@ -63,7 +65,7 @@ setup() {
 
 root_of() {  # the benchmark's --root among its arguments
     local root=runs/paper-benchmark args=("$@") i
-    [ "$COMMAND" = benchmark ] || root=runs/sweep
+    [ "$SWEEP_COMMAND" = benchmark ] || root=runs/sweep
     for ((i = 0; i < ${#args[@]} - 1; i++)); do [ "${args[i]}" = --root ] && root=${args[i + 1]}; done
     echo "$root"
 }
@@ -88,9 +90,9 @@ sweep() {  # DEST BUDGET_S ARCHIVE BENCHMARK_ARGS...: the sweep, its records and
     # appended, not truncated on open: a worker's resource tracker that outlives the sweep then writes
     # after the exit status line below, not over it
     : > "$dest/sweep.log"
-    timeout --kill-after=20 "$budget" "$PYTHON" -m tactile_braille.cli "$COMMAND" "$@" --archive "$archive" \
+    timeout --kill-after=20 "$budget" "$PYTHON" -m tactile_braille.cli "$SWEEP_COMMAND" "$@" --archive "$archive" \
         --device "${DEVICE:-cuda}" --threads 1 --jobs "${JOBS:-14}" --ray no >> "$dest/sweep.log" 2>&1 || status=$?
-    echo "benchmark exit status $status (124: stopped at the budget of $budget s)" >> "$dest/sweep.log"
+    echo "$SWEEP_COMMAND exit status $status (124: stopped at the budget of $budget s)" >> "$dest/sweep.log"
     epochs "$(root_of "$@")" > "$dest/epochs.tsv"
     mkdir -p "$archive"  # none finished: an empty archive still comes back, with the log
     tar czf "$dest/records.tgz" "$archive" -C "$dest" sweep.log

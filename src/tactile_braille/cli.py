@@ -518,13 +518,20 @@ def _run_sweep(args: argparse.Namespace, trials) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from tactile_braille.agents.run import MACHINE_SETTINGS
     from tactile_braille.cli_config import config_overrides
     from tactile_braille.sweep import plan
 
     settings = {algo: config_overrides(args, algo) for algo in args.algos}
-    if any(settings.values()) and not args.variant:
+    # Where a run is made (the dataset's file, say) is no variant of the preset: archives and resumes
+    # ignore it too.
+    changed = {name for changes in settings.values() for name in changes} - set(MACHINE_SETTINGS)
+    if changed and not args.variant:
         raise ValueError("settings that change the preset need a --variant NAME: it names the trials' "
                          "folders, so that they are never taken for the preset's own runs")  # fmt: skip
+    if args.variant and not changed:
+        raise ValueError(f"--variant {args.variant} names no setting that changes the preset: its trials "
+                         "would be the preset's own runs under another name")  # fmt: skip
     trials = plan(args.tasks, args.algos, args.seeds, args.preset, variant=args.variant or "",
                   settings=settings, **_sweep_overrides(args))  # fmt: skip
     return _run_sweep(args, trials)

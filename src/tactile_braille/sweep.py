@@ -1,6 +1,7 @@
 """Sweeps: tasks x algorithms x seeds, on Ray Tune when it is installed, one after another otherwise.
 
-Every trial is an ordinary training run in ``ROOT/{task}__{algo}__{seed}``.
+Every trial is an ordinary training run in ``ROOT/{task}__{algo}__{seed}``
+(``ROOT/{task}__{algo}__{variant}__{seed}`` for a variant of a preset).
 A trial whose folder holds a run is resumed (a finished one returns at once),
 so a sweep is resumable as a whole: run the same command again after a crash.
 Failed trials are retried (``max_failures`` times), each retry resuming from
@@ -54,8 +55,9 @@ PAPER_SIM_RUNS = (
 """The simulated rows of the paper's Table III."""
 
 
-VARIANT_NAME = re.compile(r"[A-Za-z0-9.-]+(_[A-Za-z0-9.-]+)*")
-"""A variant's name: no '__' (the separator of a trial's name) and no path characters."""
+VARIANT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9.-]*(_[A-Za-z0-9.-]+)*")
+"""A variant's name: a letter or digit first, no '__' (the separator of a trial's name), no path
+characters."""
 
 
 @dataclass(frozen=True)

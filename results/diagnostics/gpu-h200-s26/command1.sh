@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
+# (SWEEP_COMMAND was named COMMAND when this ran)
 # Session 26, first device command (carry .whl and .data; 96 s): the variant's sweep, started.
 set -e
 nvidia-smi --query-gpu=name,memory.used --format=csv > "$OUT/smi.txt"
-COMMAND=sweep START_WAIT_S=95 PYTHONUNBUFFERED=1 bash tools/lent_gpu_sweep.sh start 650 results/s26-gpu \
+SWEEP_COMMAND=sweep START_WAIT_S=95 PYTHONUNBUFFERED=1 bash tools/lent_gpu_sweep.sh start 650 results/s26-gpu \
     --tasks DiscreteAlphabet-v0 --algos dqn --preset paper --replay.relabel all --agent.batch-size 256 \
     --variant relabel-all_batch256 --seeds 0 1 2 3 4 100 --epochs 40 --precision bf16 --root runs/gpu
 nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv >> "$OUT/smi.txt"
