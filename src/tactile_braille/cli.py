@@ -499,8 +499,12 @@ def _leaderboard(args: argparse.Namespace) -> int:
     return 0
 
 
+SWEEP_RUN_OPTIONS = ("epochs", "precision", "backend", "threads", "device")
+"""Run settings that ``sweep`` and ``benchmark`` take as options of their own (for every trial)."""
+
+
 def _sweep_overrides(args: argparse.Namespace) -> dict:
-    return {name: getattr(args, name) for name in ("epochs", "precision", "backend", "threads", "device")
+    return {name: getattr(args, name) for name in SWEEP_RUN_OPTIONS
             if getattr(args, name, None) is not None}  # fmt: skip
 
 
@@ -813,7 +817,7 @@ def _add_sweep_command(commands) -> None:
                          help="name of the settings given below, in each trial's folder "
                               "(TASK__ALGO__NAME__SEED); needed with any of them")  # fmt: skip
     _add_sweep_options(sweeper, "runs/sweep")
-    add_config_options(sweeper, skip=("seed", "epochs", "precision", "threads", "device", "backend"))
+    add_config_options(sweeper, skip=("seed", *SWEEP_RUN_OPTIONS))  # seeds: --seeds
     sweeper.set_defaults(handler=_sweep)
 
 
