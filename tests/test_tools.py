@@ -1,14 +1,19 @@
-"""tools/lent_gpu_sweep.sh refuses bad input before it installs or runs anything.
+"""tools/lent_gpu_sweep.sh: bad input refused before it installs or runs anything, and its `run` path.
 
-Its whole path (install the carried wheels, sweep for a budget, archive, pack; or start, then collect)
-needs the wheels that ``prepare`` downloads, so it is run by hand (docs/evaluation.md); these are its
-checks.
+`prepare` downloads the wheels a GPU machine lacks (network), and `start`/`collect` span two device
+commands, so those are run by hand (docs/evaluation.md). The `run` path (install the carried wheels,
+sweep for a budget, archive, pack) runs end to end on the CPU in a slow test, with a placeholder wheel.
 """
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import os
 import subprocess
+import sys
+import tarfile
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -69,3 +74,65 @@ def test_lent_gpu_sweep_asks_for_the_carried_wheels(tmp_path):
     assert result.returncode == 2
     assert "no wheels in .whl/: run 'prepare' here and carry .whl" in result.stderr
     assert not (copy / "results").exists()
+
+
+def _placeholder_wheel(folder: Path) -> Path:
+    """A minimal valid pure-Python wheel: the script installs whatever is carried in .whl/."""
+    name, version = "lent_gpu_placeholder", "0.1"
+    files = {
+        f"{name}/__init__.py": "",
+        f"{name}-{version}.dist-info/METADATA": f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n",
+        f"{name}-{version}.dist-info/WHEEL": (
+            "Wheel-Version: 1.0\nGenerator: tests\nRoot-Is-Purelib: true\nTag: py3-none-any\n"
+        ),
+    }
+    info = f"{name}-{version}.dist-info"
+
+    def digest(text: str) -> str:
+        return base64.urlsafe_b64encode(hashlib.sha256(text.encode()).digest()).rstrip(b"=").decode()
+
+    record = [f"{path},sha256={digest(text)},{len(text.encode())}" for path, text in files.items()]
+    files[f"{info}/RECORD"] = "\n".join([*record, f"{info}/RECORD,,"]) + "\n"
+    folder.mkdir(parents=True)
+    wheel = folder / f"{name}-{version}-py3-none-any.whl"
+    with zipfile.ZipFile(wheel, "w") as archive:
+        for path, text in files.items():
+            archive.writestr(path, text)
+    return wheel
+
+
+@pytest.mark.slow
+def test_lent_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env_datasets, tmp_path):
+    """SWEEP_COMMAND=sweep end to end on the CPU: install, a variant's trial, archive, records.tgz.
+
+    The GPU machine's only differences are DEVICE and the wheels carried (here a placeholder, as
+    gymnasium is already installed); about 20 s, so `make test-slow`.
+    """
+    copy = tmp_path / "repo"
+    (copy / "tools").mkdir(parents=True)
+    (copy / "tools" / SCRIPT.name).write_text(SCRIPT.read_text())
+    _placeholder_wheel(copy / ".whl")
+    (copy / ".data").mkdir()
+    out = tmp_path / "out"
+    out.mkdir()
+    dataset = env_datasets["tactile_braille/DiscreteArrows-v0"]
+    result = subprocess.run(
+        ["bash", str(copy / "tools" / SCRIPT.name), "run", "300", "results/x",
+         "--tasks", "DiscreteArrows-v0", "--algos", "dqn", "--seeds", "3", "--root", "runs/s",
+         "--epochs", "1", "--steps-per-epoch", "30", "--start-steps", "20", "--updates-per-step", "1",
+         "--evaluation.test-episodes", "1", "--replay.capacity", "500", "--agent.batch-size", "8",
+         "--agent.hidden", "16", "--dataset", str(dataset), "--variant", "tiny"],
+        capture_output=True, text=True, timeout=300,
+        env={**os.environ, "OUT": str(out), "SWEEP_COMMAND": "sweep", "DEVICE": "cpu", "JOBS": "1",
+             "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "site" / "lent_gpu_placeholder").is_dir()  # the carried wheel was installed
+    trial = "DiscreteArrows-v0__dqn__tiny__3"
+    [row] = [line.split("\t") for line in (out / "epochs.tsv").read_text().splitlines()[1:]]
+    assert row[0] == f"runs/s/{trial}" and row[1] == "1"
+    with tarfile.open(out / "records.tgz") as packed:
+        names = set(packed.getnames())
+        log = packed.extractfile("sweep.log").read().decode()
+    assert {f"results/x/{trial}/typing.json", f"results/x/{trial}/progress.csv"} <= names
+    assert "sweep exit status 0" in log
