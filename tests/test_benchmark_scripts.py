@@ -98,3 +98,31 @@ def test_typing_overrun_measures_how_far_out_each_key_starts_and_splits_keys_by_
     stopping = replace_settings(config, {"edges": "stop"})
     with pytest.raises(ValueError, match="made with edges='stop': every key starts inside"):
         script.measure(train(stopping, run_dir=tmp_path / "stop", progress=False), sequences)
+
+
+def test_tap_identifiability_finds_twin_start_images_far_apart(env_datasets):
+    script = _load("tap_identifiability")
+    a = np.zeros(100, dtype=np.float32)
+    a[:10] = 1
+    b = a.copy()
+    b[10:13] = 1  # 3 pixels from a
+    c = np.zeros(100, dtype=np.float32)
+    c[50:90] = 1  # 50 from a
+    groups = [
+        (a, np.array([[0.0, 0.0], [0.3, 0.2]])),
+        (b, np.array([[10.0, 0.0]])),
+        (c, np.array([[1.0, 0.0]])),
+    ]
+    found = script.measure(groups, [0, 5])
+    assert found["starts"] == 4 and found["images"] == 3
+    assert found[">= 5 mm at 0"] == 0.0  # no image repeats 5 mm away
+    assert found[">= 5 mm at 5"] == 0.75  # a (2 starts) and b (1) are 3 pixels apart, 10 mm apart
+    assert found["fewest 5 mm apart"] == 3 and found["1 mm apart"] == 50  # a's and c's starts ~0.9 mm apart
+    groups[2] = (c, np.array([[1.0, 0.0], [7.0, 0.0]]))  # one image from starts 6 mm apart: its own twin
+    assert script.measure(groups, [0])[">= 5 mm at 0"] == 0.4  # its 2 starts of 5
+    task = "ContinuousArrows-v0"
+    seen = script.start_images(task, {"dataset": env_datasets[f"tactile_braille/{task}"]}, 40, 0)
+    assert sum(len(poses) for _, poses in seen) == 40
+    assert all(image.shape == (10_000,) and set(np.unique(image)) <= {0, 1} for image, _ in seen)
+    # the nearest-sample lookup: one image per grid sample, its starts within one cell of the 5 mm test grid
+    assert all(np.ptp(poses, axis=0).max() <= 5.0 for _, poses in seen) and len(seen) > 10
