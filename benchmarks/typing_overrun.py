@@ -8,9 +8,10 @@ that presses by pushing into the edge leaves it further out with each such press
 either way. This script types the paper's sequences (the paper's protocol, seed 0, as
 ``tactile-braille evaluate``) with the last checkpoint of each run, in the run's own world, and
 prints how far past the workspace each key's attempt started (median and largest) and the accuracy
-and steps a key of the keys started inside and of those started :data:`OUT_MM` or more outside.
+and steps a key of the keys started inside and of those started :data:`OUT_MM` or more outside;
+``--by-key`` adds a row per goal key (which keys a run misses, and whether from outside).
 
-    python benchmarks/typing_overrun.py RUN_DIR [RUN_DIR ...]
+    python benchmarks/typing_overrun.py RUN_DIR [RUN_DIR ...] [--by-key]
 """
 
 from __future__ import annotations
@@ -52,10 +53,14 @@ class Overrun:
     starts_mm: np.ndarray
     correct: np.ndarray
     steps: np.ndarray
+    goals: np.ndarray
 
-    def split(self, outside: bool) -> tuple[int, float, float]:
-        """(keys, accuracy, steps a key) of the keys started outside (or inside)."""
+    def split(self, outside: bool, goal: str | None = None) -> tuple[int, float, float]:
+        """(keys, accuracy, steps a key) of the keys started outside (or inside); of one goal key's only
+        if ``goal``."""
         chosen = (self.starts_mm >= OUT_MM) == outside
+        if goal is not None:
+            chosen &= self.goals == goal
         if not chosen.any():
             return 0, float("nan"), float("nan")
         return int(chosen.sum()), float(self.correct[chosen].mean()), float(self.steps[chosen].mean())
@@ -80,12 +85,14 @@ def measure(run_dir: str, sequences=None) -> Overrun:
         starts_mm=np.array(counted.starts_mm),
         correct=np.array([g == p for g, p in zip(goals, pressed, strict=True)]),
         steps=np.array([s for steps in typed.steps for s in steps], dtype=float),
+        goals=np.array(goals),
     )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("runs", nargs="+", help="run folders made with edges=overrun (with checkpoint.pt)")
+    parser.add_argument("--by-key", action="store_true", help="a row per goal key too")
     args = parser.parse_args()
     print(f"| run | keys started {OUT_MM} mm or more out | median / largest start (mm) "
           "| inside: accuracy, steps a key | outside: accuracy, steps a key |")  # fmt: skip
@@ -96,6 +103,10 @@ def main() -> None:
         print(f"| {run} | {outside[0]} of {len(found.starts_mm)} "
               f"| {np.median(found.starts_mm):.1f} / {found.starts_mm.max():.1f} "
               f"| {inside[1]:.3f}, {inside[2]:.1f} | {outside[1]:.3f}, {outside[2]:.1f} |")  # fmt: skip
+        for goal in dict.fromkeys(found.goals) if args.by_key else ():
+            inside, outside = found.split(False, goal), found.split(True, goal)
+            print(f"| {run}, goal {goal} | {outside[0]} of {inside[0] + outside[0]} | "
+                  f"| {inside[1]:.3f}, {inside[2]:.1f} | {outside[1]:.3f}, {outside[2]:.1f} |")  # fmt: skip
 
 
 if __name__ == "__main__":

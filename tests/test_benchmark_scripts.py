@@ -95,6 +95,15 @@ def test_typing_overrun_measures_how_far_out_each_key_starts_and_splits_keys_by_
     inside, outside = found.split(False), found.split(True)
     assert inside[0] + outside[0] == 6 and inside[0] >= 2
     assert inside[1] == pytest.approx(found.correct[found.starts_mm < script.OUT_MM].mean())
+    assert list(found.goals) == [key for sequence in sequences for key in sequence]
+    by_key = {
+        goal: (found.split(False, goal), found.split(True, goal)) for goal in ("UP", "LEFT", "DOWN", "RIGHT")
+    }
+    assert sum(i[0] + o[0] for i, o in by_key.values()) == 6 and by_key["UP"][0][0] + by_key["UP"][1][0] == 2
+    first = found.goals == "UP"  # UP starts the first sequence from a fresh pose inside
+    assert by_key["UP"][0][0] >= 1 and by_key["UP"][0][1] == pytest.approx(
+        found.correct[first & (found.starts_mm < script.OUT_MM)].mean()
+    )
     stopping = replace_settings(config, {"edges": "stop"})
     with pytest.raises(ValueError, match="made with edges='stop': every key starts inside"):
         script.measure(train(stopping, run_dir=tmp_path / "stop", progress=False), sequences)
