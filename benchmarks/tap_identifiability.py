@@ -54,6 +54,11 @@ def start_images(task: str, options: dict, resets: int, seed: int) -> list[tuple
     return [(image, np.array(poses)) for image, poses in images.values()]
 
 
+def _distances(points: np.ndarray) -> np.ndarray:
+    """Pairwise Euclidean distances (mm) between the rows of ``points``."""
+    return np.sqrt(((points[:, None] - points[None]) ** 2).sum(-1))
+
+
 def measure(groups: list[tuple[np.ndarray, np.ndarray]], taus: list[int]) -> dict[str, float]:
     """Shares of starts with a twin image >= 5 mm away, and the pixels that change 1 mm apart."""
     rows = np.array([image for image, _ in groups], dtype=np.float32)
@@ -61,10 +66,10 @@ def measure(groups: list[tuple[np.ndarray, np.ndarray]], taus: list[int]) -> dic
     centre = np.array([poses.mean(0) for _, poses in groups])
     # an image seen from poses >= 5 mm apart is its own twin
     # (the nearest-sample lookup alone keeps one image's poses within ~0.7 mm)
-    spread = np.array([np.sqrt(((p[:, None] - p[None]) ** 2).sum(-1)).max() for _, p in groups])
+    spread = np.array([_distances(poses).max() for _, poses in groups])
     on = rows.sum(1)
     hamming = on[:, None] + on[None, :] - 2.0 * rows @ rows.T
-    apart = np.sqrt(((centre[:, None] - centre[None]) ** 2).sum(-1))
+    apart = _distances(centre)
     neighbours = (apart > 0.5) & (apart < 1.5)
     out = {
         "starts": float(starts.sum()),
