@@ -685,8 +685,59 @@ def test_a_discrete_sac_all_goals_update_is_the_mean_of_its_single_goal_updates(
     assert losses == pytest.approx({name: np.mean([s[name] for s in single]) for name in losses}, rel=1e-5)
 
 
+def test_sacs_networks_give_every_goals_outputs_each_the_output_under_that_goal_alone(tasks):
+    """SAC's critics value, and its policy acts, under every goal at once (the encoder run once): each
+    goal's column is the output under that goal alone, for one action or one action per goal."""
+    agent = build("sac", tasks, critic_pose=True)
+    data = make_batch("sac", tasks)
+    images, goals, previous = state_inputs(agent, data)
+    actions, poses = torch.as_tensor(data["actions"]), torch.rand(len(goals), 3)
+    size = goals.shape[1]
+    per_goal = torch.rand(len(goals), size, actions.shape[1]) * 2 - 1
+    with torch.no_grad():
+        _, _, every_mean = agent.actor.every_goal(images, previous)
+        every_q = agent.critics[0].every_goal(images, previous, actions, poses)
+        every_q_own = agent.critics[0].every_goal(images, previous, per_goal, poses)
+        assert every_mean.shape == (len(goals), size, actions.shape[1]) and every_q.shape == (len(goals), size)
+        for g in range(size):
+            one_hot = torch.eye(size)[g].expand(len(goals), -1)
+            assert torch.allclose(agent.actor(images, one_hot, previous)[2], every_mean[:, g], atol=1e-6)
+            q = agent.critics[0](images, one_hot, previous, actions, poses)
+            assert torch.allclose(q, every_q[:, g], atol=1e-5)
+            own = agent.critics[0](images, one_hot, previous, per_goal[:, g], poses)
+            assert torch.allclose(own, every_q_own[:, g], atol=1e-5)
+    with pytest.raises(ValueError, match="needs poses of size 3"):
+        agent.critics[0].every_goal(images, previous, actions)
+
+
+def test_a_sac_all_goals_update_fits_each_goals_relabelled_targets(tasks):
+    """SAC under every goal: its critics' loss is the mean over goals of the single-goal updates' on
+    the batch relabelled to each goal (each on a fresh copy of the same agent; a policy of a
+    vanishing deviation and temperature, so that the sampled next actions agree); and its actor
+    and temperature learn from every goal's actions."""
+    data = make_batch("sac", tasks)
+    goals = data["goals"].shape[1]
+    data["achieved"] = np.array([-1, 0, 3, -1, 3, 5, -1, 1])
+    other = build("sac", tasks, seed=1).critics.state_dict()
+
+    def agent(**options):
+        made = build("sac", tasks, log_std="tanh", initial_alpha=1e-9, **options)
+        made.targets.load_state_dict(other)  # targets unlike the critics, so that they count
+        with torch.no_grad():  # a log deviation of -20: the sampled action is the mean
+            made.actor.log_std.weight.zero_()
+            made.actor.log_std.bias.fill_(-50.0)
+        return made
+
+    single = [agent().update(relabelled_to(data, g))["losses/qf_loss"] for g in range(goals)]
+    every = agent(all_goals=True)
+    actor = snapshot(every.actor)
+    losses = every.update(data)
+    assert losses["losses/qf_loss"] == pytest.approx(np.mean(single), rel=1e-4)
+    assert not same_tensors(actor, snapshot(every.actor)) and all(np.isfinite(v) for v in losses.values())
+
+
 def test_an_all_goals_update_needs_the_pressed_keys(tasks):
-    for algo in ("dqn", "sac_discrete"):
+    for algo in ("dqn", "sac_discrete", "sac"):
         with pytest.raises(ValueError, match=r"'achieved'.*all_goals=True"):
             build(algo, tasks, all_goals=True).update(make_batch(algo, tasks))
 

@@ -215,20 +215,22 @@ def test_sac_bf16_training_logs_finite_losses(env_datasets, tmp_path, recording)
     assert json.loads((run / "config.json").read_text())["precision"] == "bf16"
 
 
-@pytest.mark.parametrize("algo", ["dqn", "sac_discrete"])
+@pytest.mark.parametrize("algo", ["dqn", "sac_discrete", "sac"])
 def test_an_all_goals_run_replays_the_pressed_keys_and_learns_every_goal(
     env_datasets, tmp_path, recording, algo
 ):
-    agent_config = DQNConfig if algo == "dqn" else DiscreteSACConfig
+    task = CONTINUOUS_TASK if algo == "sac" else DISCRETE_TASK
+    heads = {} if algo == "sac" else {"goal_heads": True}  # SAC's goal is an input
+    agent_config = {"dqn": DQNConfig, "sac_discrete": DiscreteSACConfig, "sac": SACConfig}[algo]
     config = TrainConfig(
-        task=DISCRETE_TASK,
+        task=task,
         algo=algo,
         epochs=1,
         steps_per_epoch=40,
         start_steps=10,
         threads=1,
-        dataset=str(env_datasets[DISCRETE_TASK]),
-        agent=agent_config(hidden=(64,), batch_size=8, all_goals=True, goal_heads=True),
+        dataset=str(env_datasets[task]),
+        agent=agent_config(hidden=(64,), batch_size=8, all_goals=True, **heads),
         evaluation={"test_episodes": 1},
         replay={"capacity": 500, "relabel": "all"},
     )

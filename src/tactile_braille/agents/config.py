@@ -198,6 +198,9 @@ class SACConfig:
         action_input_scale: actions (the previous one, and the one a critic values) are multiplied
             by this before they join the networks: 1 (ours, [-1, 1]) or the task's largest move in
             mm (the released code's networks read actions in mm).
+        all_goals: every update teaches every goal, as DQN's: the critics' targets, the actor's
+            loss and the temperature's entropy are computed under each goal (the goal one-hot an
+            input, the encoder run once) for each sampled transition. ``False``: the sampled goal only.
     """
 
     gamma: float = 0.95
@@ -215,6 +218,7 @@ class SACConfig:
     weights_init: WeightsInit = "he"
     log_std: LogStdRule = "clamp"
     action_input_scale: float = 1.0
+    all_goals: bool = False
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)

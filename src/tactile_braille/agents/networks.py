@@ -100,15 +100,21 @@ class GoalConditionedTrunk(nn.Module):
         return self.dense(torch.cat([self.encode(images), *vectors], dim=-1))
 
     def every_goal(
-        self, images: torch.Tensor, previous_actions: torch.Tensor, goal_size: int
+        self, images: torch.Tensor, previous_actions: torch.Tensor, goal_size: int, *vectors: torch.Tensor
     ) -> torch.Tensor:
         """The dense layers' output under every goal one-hot, shape (B, goal_size, features), from one
-        pass of the encoder (for a trunk whose vectors are the goal, then the previous action)."""
+        pass of the encoder (for a trunk whose vectors are the goal, the previous action, then
+        ``vectors``: each (B, n), the same under every goal, or (B, goal_size, n), one per goal)."""
         features = self.encode(images)
         batch = len(features)
         goals = torch.eye(goal_size, dtype=features.dtype, device=features.device).expand(batch, -1, -1)
-        previous = previous_actions.to(features.dtype)[:, None].expand(-1, goal_size, -1)
-        return self.dense(torch.cat([features[:, None].expand(-1, goal_size, -1), goals, previous], dim=-1))
+        per_goal = [
+            vector.to(features.dtype) if vector.dim() == 3 else vector.to(features.dtype)[:, None].expand(
+                -1, goal_size, -1
+            )
+            for vector in (features, previous_actions, *vectors)
+        ]
+        return self.dense(torch.cat([per_goal[0], goals, *per_goal[1:]], dim=-1))
 
 
 def _small_head(inputs: int, outputs: int) -> nn.Linear:
@@ -384,20 +390,31 @@ class ContinuousQNetwork(nn.Module):
         vector_size = goal_size + previous_action_size + action_size + pose_size
         self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
         self.q = _small_head(self.trunk.features, 1)
-        self.pose_size, self.action_scale = pose_size, action_scale
+        self.pose_size, self.action_scale, self.goal_size = pose_size, action_scale, goal_size
         _released_continuous(self.trunk, [self.q], weights_init)
 
     def forward(self, images, goals, previous_actions, actions, poses=None) -> torch.Tensor:
         """Q-values, shape (B,); ``poses`` (B, pose_size) for an asymmetric critic, else None."""
-        if poses is None and self.pose_size:
-            raise ValueError(f"this asymmetric critic needs poses of size {self.pose_size}, got none")
-        if poses is not None and not self.pose_size:
-            raise ValueError("this critic takes no poses (pose_size=0), but was given some")
+        self._check_poses(poses)
         previous_actions, actions = previous_actions * self.action_scale, actions * self.action_scale
         vectors = (
             (goals, previous_actions, actions) if poses is None else (goals, previous_actions, actions, poses)
         )
         return self.q(self.trunk(images, *vectors)).squeeze(-1).float()
+
+    def every_goal(self, images, previous_actions, actions, poses=None) -> torch.Tensor:
+        """Q-values under every goal, shape (B, goal_size), from one pass of the encoder; ``actions``
+        (B, n), the same action under every goal, or (B, goal_size, n), one per goal."""
+        self._check_poses(poses)
+        vectors = (actions * self.action_scale,) if poses is None else (actions * self.action_scale, poses)
+        hidden = self.trunk.every_goal(images, previous_actions * self.action_scale, self.goal_size, *vectors)
+        return self.q(hidden).squeeze(-1).float()
+
+    def _check_poses(self, poses: torch.Tensor | None) -> None:
+        if poses is None and self.pose_size:
+            raise ValueError(f"this asymmetric critic needs poses of size {self.pose_size}, got none")
+        if poses is not None and not self.pose_size:
+            raise ValueError("this critic takes no poses (pose_size=0), but was given some")
 
 
 class GaussianPolicy(nn.Module):
@@ -428,12 +445,19 @@ class GaussianPolicy(nn.Module):
         self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
         self.mean = _small_head(self.trunk.features, action_size)
         self.log_std = _small_head(self.trunk.features, action_size)
-        self.log_std_rule, self.action_scale = log_std, action_scale
+        self.log_std_rule, self.action_scale, self.goal_size = log_std, action_scale, goal_size
         _released_continuous(self.trunk, [self.mean, self.log_std], weights_init)
 
     def forward(self, images, goals, previous_actions) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """A reparameterised sample, its log-probability (B,), and the deterministic action."""
-        hidden = self.trunk(images, goals, previous_actions * self.action_scale)
+        return self._sample(self.trunk(images, goals, previous_actions * self.action_scale))
+
+    def every_goal(self, images, previous_actions) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The same under every goal, from one pass of the encoder: samples and deterministic actions
+        (B, goal_size, n), log-probabilities (B, goal_size)."""
+        return self._sample(self.trunk.every_goal(images, previous_actions * self.action_scale, self.goal_size))
+
+    def _sample(self, hidden: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         mean, log_std = self.mean(hidden).float(), self.log_deviation(hidden)
         std = log_std.exp()
         noise = torch.randn_like(mean)

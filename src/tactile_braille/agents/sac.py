@@ -4,7 +4,9 @@ Reads top to bottom: hyperparameters, a tanh-squashed Gaussian policy and twin
 Q critics over the paper's encoder (the action joins the goal after the
 convolutions), then the three updates: critics towards the soft Bellman
 target of the Polyak-averaged targets, the actor through the reparameterised
-sample, the temperature towards the target entropy.
+sample, the temperature towards the target entropy. With ``all_goals`` each
+is computed under every goal of each sampled transition, as DQN's and
+discrete SAC's all-goals updates.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from tactile_braille.agents.common import (
     POSE_SIZE,
     Agent,
     critic_poses,
+    every_goal_rewards,
     network_options,
     spaces_sizes,
 )
@@ -97,31 +100,37 @@ class SACAgent(Agent):
         return (sample if explore and not deterministic else mean)[0].cpu().numpy().astype(np.float32)
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
-        """One update of the critics, the actor and the temperature."""
+        """One update of the critics, the actor and the temperature (under every goal of each
+        transition with ``all_goals``: values (B, goals) where the single-goal update has (B,))."""
         t = self.tensors(batch)
         alpha = self.log_alpha.exp().detach()
-        state = (t["images"], t["goals"], t["previous_actions"])
-        next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
         poses, next_poses = critic_poses(t, self.config.critic_pose)
+        if self.config.all_goals:
+            rewards = every_goal_rewards(t, self.actor.goal_size)
+            state, next_state = (t["images"], t["previous_actions"]), (t["next_images"], t["next_previous_actions"])
+            actor, critics = self.actor.every_goal, [critic.every_goal for critic in self.critics]
+            targets = [target.every_goal for target in self.targets]
+            continues = (self.discount(t) * (1.0 - t["dones"]))[:, None]  # a press ends it under any goal
+        else:
+            rewards = t["rewards"]
+            state = (t["images"], t["goals"], t["previous_actions"])
+            next_state = (t["next_images"], t["goals"], t["next_previous_actions"])
+            actor, critics, targets = self.actor, list(self.critics), list(self.targets)
+            continues = self.discount(t) * (1.0 - t["dones"])
         with self.autocast():
             with torch.no_grad():
-                next_actions, next_log_probs, _ = self.actor(*next_state)
-                next_q = torch.min(
-                    *(target(*next_state, next_actions, *next_poses) for target in self.targets)
-                )
-                next_value = next_q - alpha * next_log_probs
-                target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
-            critic_loss = sum(
-                F.mse_loss(critic(*state, t["actions"], *poses), target) for critic in self.critics
-            )
+                next_actions, next_log_probs, _ = actor(*next_state)
+                next_q = torch.min(*(target(*next_state, next_actions, *next_poses) for target in targets))
+                target = rewards + continues * (next_q - alpha * next_log_probs)
+            critic_loss = sum(F.mse_loss(critic(*state, t["actions"], *poses), target) for critic in critics)
         self.critic_optimiser.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_optimiser.step()
 
         self.critics.requires_grad_(False)  # the actor's loss moves the actor only
         with self.autocast():
-            actions, log_probs, _ = self.actor(*state)
-            q = torch.min(*(critic(*state, actions, *poses) for critic in self.critics))
+            actions, log_probs, _ = actor(*state)
+            q = torch.min(*(critic(*state, actions, *poses) for critic in critics))
             actor_loss = (alpha * log_probs - q).mean()
         self.actor_optimiser.zero_grad(set_to_none=True)
         actor_loss.backward()
