@@ -1,0 +1,94 @@
+"""What an all-goals update costs: one update of each agent with and without ``all_goals``, side by side.
+
+The `paper` preset's agents (bf16, batch 32, one thread) on a replay of real
+environment steps; the two variants are timed in alternating rounds, so that
+a shared, noisy machine slows both alike, and the ratio is the figure to read.
+The alphabet's 27 goals run the dense layers 27 times per transition; the
+arrows' 4, four times; the encoder runs once either way.
+
+    python benchmarks/all_goals_cost.py [--updates 10] [--rounds 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import statistics
+import time
+
+import numpy as np
+import torch
+
+import tactile_braille  # noqa: F401 - registers the environments
+from tactile_braille.agents import preset_config
+from tactile_braille.agents.replay import EpisodeReplayBuffer
+from tactile_braille.agents.training import make_agent, make_env
+
+CASES = (
+    ("dqn", "tactile_braille/DiscreteArrows-v0"),
+    ("dqn", "tactile_braille/DiscreteAlphabet-v0"),
+    ("sac_discrete", "tactile_braille/DiscreteArrows-v0"),
+    ("sac", "tactile_braille/ContinuousArrows-v0"),
+    ("sac", "tactile_braille/ContinuousAlphabet-v0"),
+)
+
+
+def replay(env, steps: int = 400) -> EpisodeReplayBuffer:
+    """A replay of random steps that serves all-goals batches (they also suit single-goal updates)."""
+    spaces = env.observation_space
+    buffer = EpisodeReplayBuffer(
+        2_000,
+        spaces["desired_goal"].shape[0],
+        env.action_space.shape,
+        spaces["previous_action"].shape[0],
+        all_goals=True,
+    )
+    observation, _ = env.reset(seed=0)
+    buffer.start_episode(observation)
+    for _ in range(steps):
+        action = env.action_space.sample()
+        observation, reward, terminated, truncated, _ = env.step(action)
+        buffer.add_step(action, reward, observation, terminated)
+        if terminated or truncated:
+            buffer.end_episode()
+            observation, _ = env.reset()
+            buffer.start_episode(observation)
+    return buffer
+
+
+def update_ms(agent, batches: list[dict]) -> float:
+    start = time.perf_counter()
+    for batch in batches:
+        agent.update(batch)
+    return (time.perf_counter() - start) / len(batches) * 1e3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--updates", type=int, default=10, help="updates per timing")
+    parser.add_argument("--rounds", type=int, default=5, help="alternating timings of each variant")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    print(f"{'agent':<14}{'task':<22}{'single goal':>13}{'all goals':>11}{'ratio':>7}")
+    for algo, task in CASES:
+        config = preset_config("paper", task, algo, precision="bf16")
+        env = make_env(config)
+        buffer, rng = replay(env), np.random.default_rng(0)
+        batches = [buffer.sample(config.agent.batch_size, rng) for _ in range(args.updates)]
+        agents = {
+            every: make_agent(dataclasses.replace(config, agent=dataclasses.replace(config.agent, all_goals=every)), env)
+            for every in (False, True)
+        }
+        for agent in agents.values():
+            update_ms(agent, batches[:2])  # warm-up
+        times = {every: [] for every in agents}
+        for _ in range(args.rounds):
+            for every, agent in agents.items():
+                times[every].append(update_ms(agent, batches))
+        single, every = (statistics.median(times[key]) for key in (False, True))
+        print(f"{algo:<14}{task.split('/')[1]:<22}{single:>10.1f} ms{every:>8.1f} ms{every / single:>7.2f}")
+        env.close()
+
+
+if __name__ == "__main__":
+    main()
