@@ -75,9 +75,10 @@ def main() -> None:
         env = make_env(config)
         buffer, rng = replay(env), np.random.default_rng(0)
         batches = [buffer.sample(config.agent.batch_size, rng) for _ in range(args.updates)]
+        variants = {every: dataclasses.replace(config.agent, all_goals=every) for every in (False, True)}
         agents = {
-            every: make_agent(dataclasses.replace(config, agent=dataclasses.replace(config.agent, all_goals=every)), env)
-            for every in (False, True)
+            every: make_agent(dataclasses.replace(config, agent=agent), env)
+            for every, agent in variants.items()
         }
         for agent in agents.values():
             update_ms(agent, batches[:2])  # warm-up

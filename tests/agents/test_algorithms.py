@@ -698,7 +698,8 @@ def test_sacs_networks_give_every_goals_outputs_each_the_output_under_that_goal_
         _, _, every_mean = agent.actor.every_goal(images, previous)
         every_q = agent.critics[0].every_goal(images, previous, actions, poses)
         every_q_own = agent.critics[0].every_goal(images, previous, per_goal, poses)
-        assert every_mean.shape == (len(goals), size, actions.shape[1]) and every_q.shape == (len(goals), size)
+        assert every_mean.shape == (len(goals), size, actions.shape[1])
+        assert every_q.shape == (len(goals), size)
         for g in range(size):
             one_hot = torch.eye(size)[g].expand(len(goals), -1)
             assert torch.allclose(agent.actor(images, one_hot, previous)[2], every_mean[:, g], atol=1e-6)

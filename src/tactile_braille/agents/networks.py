@@ -109,9 +109,9 @@ class GoalConditionedTrunk(nn.Module):
         batch = len(features)
         goals = torch.eye(goal_size, dtype=features.dtype, device=features.device).expand(batch, -1, -1)
         per_goal = [
-            vector.to(features.dtype) if vector.dim() == 3 else vector.to(features.dtype)[:, None].expand(
-                -1, goal_size, -1
-            )
+            vector.to(features.dtype)
+            if vector.dim() == 3
+            else vector.to(features.dtype)[:, None].expand(-1, goal_size, -1)
             for vector in (features, previous_actions, *vectors)
         ]
         return self.dense(torch.cat([per_goal[0], goals, *per_goal[1:]], dim=-1))
@@ -455,7 +455,8 @@ class GaussianPolicy(nn.Module):
     def every_goal(self, images, previous_actions) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The same under every goal, from one pass of the encoder: samples and deterministic actions
         (B, goal_size, n), log-probabilities (B, goal_size)."""
-        return self._sample(self.trunk.every_goal(images, previous_actions * self.action_scale, self.goal_size))
+        previous_actions = previous_actions * self.action_scale
+        return self._sample(self.trunk.every_goal(images, previous_actions, self.goal_size))
 
     def _sample(self, hidden: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         mean, log_std = self.mean(hidden).float(), self.log_deviation(hidden)

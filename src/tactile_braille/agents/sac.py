@@ -107,7 +107,8 @@ class SACAgent(Agent):
         poses, next_poses = critic_poses(t, self.config.critic_pose)
         if self.config.all_goals:
             rewards = every_goal_rewards(t, self.actor.goal_size)
-            state, next_state = (t["images"], t["previous_actions"]), (t["next_images"], t["next_previous_actions"])
+            state = (t["images"], t["previous_actions"])
+            next_state = (t["next_images"], t["next_previous_actions"])
             actor, critics = self.actor.every_goal, [critic.every_goal for critic in self.critics]
             targets = [target.every_goal for target in self.targets]
             continues = (self.discount(t) * (1.0 - t["dones"]))[:, None]  # a press ends it under any goal
