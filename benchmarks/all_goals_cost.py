@@ -21,8 +21,8 @@ import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
 from tactile_braille.agents import preset_config
-from tactile_braille.agents.replay import EpisodeReplayBuffer
 from tactile_braille.agents.training import make_agent, make_env
+from train_throughput import random_replay  # this folder's
 
 CASES = (
     ("dqn", "tactile_braille/DiscreteArrows-v0"),
@@ -31,29 +31,6 @@ CASES = (
     ("sac", "tactile_braille/ContinuousArrows-v0"),
     ("sac", "tactile_braille/ContinuousAlphabet-v0"),
 )
-
-
-def replay(env, steps: int = 400) -> EpisodeReplayBuffer:
-    """A replay of random steps that serves all-goals batches (they also suit single-goal updates)."""
-    spaces = env.observation_space
-    buffer = EpisodeReplayBuffer(
-        2_000,
-        spaces["desired_goal"].shape[0],
-        env.action_space.shape,
-        spaces["previous_action"].shape[0],
-        all_goals=True,
-    )
-    observation, _ = env.reset(seed=0)
-    buffer.start_episode(observation)
-    for _ in range(steps):
-        action = env.action_space.sample()
-        observation, reward, terminated, truncated, _ = env.step(action)
-        buffer.add_step(action, reward, observation, terminated)
-        if terminated or truncated:
-            buffer.end_episode()
-            observation, _ = env.reset()
-            buffer.start_episode(observation)
-    return buffer
 
 
 def update_ms(agent, batches: list[dict]) -> float:
@@ -73,7 +50,7 @@ def main() -> None:
     for algo, task in CASES:
         config = preset_config("paper", task, algo, precision="bf16")
         env = make_env(config)
-        buffer, rng = replay(env), np.random.default_rng(0)
+        buffer, rng = random_replay(env, all_goals=True), np.random.default_rng(0)  # serves both
         batches = [buffer.sample(config.agent.batch_size, rng) for _ in range(args.updates)]
         variants = {every: dataclasses.replace(config.agent, all_goals=every) for every in (False, True)}
         agents = {

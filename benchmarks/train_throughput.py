@@ -43,11 +43,22 @@ def ours_update_ms(algo: str, precision: str, updates: int) -> float:
     env = make_env(config)
     agent = make_agent(config, env)
     rng = np.random.default_rng(0)
-    action_shape = env.action_space.shape if "Continuous" in config.task else ()
-    buffer = EpisodeReplayBuffer(2_000, config_goal(env), action_shape, config_previous(env))
+    buffer = random_replay(env)
+    for _ in range(3):
+        agent.update(buffer.sample(32, rng))
+    start = time.perf_counter()
+    for _ in range(updates):
+        agent.update(buffer.sample(32, rng))
+    return (time.perf_counter() - start) / updates * 1e3
+
+
+def random_replay(env: gym.Env, steps: int = 400, **options) -> EpisodeReplayBuffer:
+    """A replay of ``steps`` random environment steps (``options``: the buffer's, e.g. ``all_goals``)."""
+    action_shape = env.action_space.shape if isinstance(env.action_space, gym.spaces.Box) else ()
+    buffer = EpisodeReplayBuffer(2_000, config_goal(env), action_shape, config_previous(env), **options)
     observation, _ = env.reset(seed=0)
     buffer.start_episode(observation)
-    for _ in range(400):
+    for _ in range(steps):
         action = env.action_space.sample()
         observation, reward, terminated, truncated, _ = env.step(action)
         buffer.add_step(action, reward, observation, terminated)
@@ -55,12 +66,7 @@ def ours_update_ms(algo: str, precision: str, updates: int) -> float:
             buffer.end_episode()
             observation, _ = env.reset()
             buffer.start_episode(observation)
-    for _ in range(3):
-        agent.update(buffer.sample(32, rng))
-    start = time.perf_counter()
-    for _ in range(updates):
-        agent.update(buffer.sample(32, rng))
-    return (time.perf_counter() - start) / updates * 1e3
+    return buffer
 
 
 def config_goal(env: gym.Env) -> int:
