@@ -11,6 +11,8 @@ feature observations whose reward only the sensor pose explains
 from __future__ import annotations
 
 import math
+import types
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -21,7 +23,7 @@ from torch.nn import functional as F
 
 from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK, HIDDEN, same_weights, through_file
 from feature_agents import ACTIONS, FEATURES, GOALS, PREVIOUS, batch, make
-from tactile_braille.agents import AGENTS
+from tactile_braille.agents import AGENTS, common
 from tactile_braille.agents.common import POSE_SIZE
 
 ACTOR_CRITICS = ("sac_discrete", "sac", "td3")
@@ -348,6 +350,29 @@ def test_bf16_autocast_stays_close_to_fp32(algo, tasks):
     assert losses_half[loss] == pytest.approx(losses_full[loss], rel=0.03)
     if algo == "sac":
         assert losses_half["losses/actor_loss"] == pytest.approx(losses_full["losses/actor_loss"], rel=0.03)
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_bf16_warns_where_the_processor_only_emulates_it(native, tasks, monkeypatch):
+    monkeypatch.setattr(common, "native_bf16", lambda device: native)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        build("dqn", tasks, precision="bf16")
+        build("dqn", tasks, precision="fp32")
+    emulated = [w for w in caught if issubclass(w.category, RuntimeWarning) and "emulated" in str(w.message)]
+    assert len(emulated) == (0 if native else 1)  # bf16 alone, and only where it is emulated
+    if not native:
+        assert "--precision fp32" in str(emulated[0].message)
+
+
+def test_native_bf16_reads_the_processor_flags_without_onednn_s_check(monkeypatch):
+    monkeypatch.setattr(torch.ops, "mkldnn", types.SimpleNamespace())  # a torch without the check
+    monkeypatch.setattr(common, "_cpu_flags", lambda: frozenset({"avx2", "fma"}))
+    assert common.native_bf16("cpu") is False
+    monkeypatch.setattr(common, "_cpu_flags", lambda: frozenset({"avx2", "avx512_bf16"}))
+    assert common.native_bf16("cpu") is True
+    monkeypatch.setattr(common, "_cpu_flags", lambda: frozenset({"amx_bf16"}))
+    assert common.native_bf16(torch.device("cpu")) is True
 
 
 # ---------------------------------------------------------------- SAC's temperature

@@ -5,11 +5,18 @@ Speed decisions (measured by ``benchmarks/train_throughput.py``): Adam runs
 much as the network's forward and backward together on a CPU), and
 ``precision="bf16"`` runs the networks under bfloat16 autocast (losses,
 log-probabilities and targets stay float32). Neither changes the algorithm.
+bf16 is fast only where the processor computes it natively (AVX512-BF16 or
+AMX on x86, a CUDA device of compute capability 8 or more); elsewhere, as on
+a CPU with AVX2 alone, torch emulates it and an update runs several times
+slower than in float32 (``benchmarks/precision_cost.py``), so an agent made
+with bf16 there warns once (:func:`native_bf16`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
+import warnings
 from typing import ClassVar
 
 import gymnasium as gym
@@ -70,6 +77,47 @@ def every_goal_rewards(batch: dict[str, torch.Tensor], goal_size: int) -> torch.
     return (achieved[:, None] == torch.arange(goal_size, device=achieved.device)).float()
 
 
+@functools.cache
+def _cpu_flags() -> frozenset[str]:
+    """The processor's feature flags as Linux reports them (empty elsewhere)."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith("flags"):
+                    return frozenset(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return frozenset()
+
+
+def native_bf16(device: str | torch.device = "cpu") -> bool:
+    """Whether ``device`` computes bfloat16 natively, so that bf16 autocast speeds its updates up.
+
+    CUDA: ``torch.cuda.is_bf16_supported()``. CPU: oneDNN's own check where torch has it, else the
+    processor's flags (``avx512_bf16`` or ``amx_bf16``). Elsewhere torch emulates bf16.
+    """
+    device = torch.device(device)
+    if device.type == "cuda":
+        return bool(torch.cuda.is_available() and torch.cuda.is_bf16_supported())
+    if device.type != "cpu":
+        return True  # no check known: take the user's word
+    check = getattr(torch.ops.mkldnn, "_is_mkldnn_bf16_supported", None)
+    if check is not None:
+        try:
+            return bool(check())
+        except RuntimeError:
+            pass
+    return bool({"avx512_bf16", "amx_bf16"} & _cpu_flags())
+
+
+BF16_EMULATED = (
+    "bf16 autocast on this {device} is emulated (no native bfloat16: AVX512-BF16 or AMX on x86, compute "
+    "capability 8 or more on CUDA), so updates run several times slower than in fp32 (python "
+    "benchmarks/precision_cost.py measures it); pass --precision fp32 for speed. The committed Table III "
+    "rows ran in bf16, and a run in fp32 makes a row of its own."
+)
+
+
 def chosen(values: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
     """The values of the batch's actions: ``values`` (B, ..., actions) and ``actions`` (B,) give (B, ...)."""
     index = actions.reshape(-1, *[1] * (values.dim() - 1)).expand(*values.shape[:-1], 1)
@@ -93,6 +141,8 @@ class Agent:
             raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
         self.device = torch.device(device)
         self.precision = precision
+        if precision == "bf16" and not native_bf16(self.device):
+            warnings.warn(BF16_EMULATED.format(device=self.device.type.upper()), RuntimeWarning, stacklevel=2)
 
     def autocast(self) -> contextlib.AbstractContextManager:
         """bfloat16 autocast for ``precision="bf16"``, nothing otherwise."""
