@@ -638,6 +638,31 @@ def test_an_inverse_dynamics_loss_trains_the_q_networks_encoder_to_tell_the_acti
         build("dqn", tasks, inverse_dynamics=-1.0)
 
 
+def test_a_pressed_key_loss_trains_the_q_networks_encoder_to_name_the_pressed_key(tasks):
+    """The key head reads the frames presses were made from; its loss is the cross-entropy of that reading
+    against the pressed keys, reaches the encoder and leaves the TD loss alone; without press frames
+    yet it adds nothing, and batches without them are refused."""
+    data = make_batch("dqn", tasks)
+    goals = tasks["discrete"]["observation_space"]["desired_goal"].shape[0]
+    presses = {**data, "press_images": data["images"][:5], "press_keys": np.arange(5) % goals}
+    plain, helped = build("dqn", tasks), build("dqn", tasks, pressed_key=0.5)
+    assert same_weights(plain.q, helped.q)  # the head is made after the Q-network: the same start
+    with torch.no_grad():
+        t = helped.tensors(presses)
+        expected = F.cross_entropy(helped.key_head(helped.q.trunk.encode(t["press_images"])), t["press_keys"])
+    losses, plain_losses = helped.update(presses), plain.update(data)
+    assert losses["losses/pressed_key_loss"] == pytest.approx(expected.item(), rel=1e-5)
+    assert losses["losses/q_loss"] == pytest.approx(plain_losses["losses/q_loss"], rel=1e-6)
+    assert not same_weights(helped.q.trunk.encoder, plain.q.trunk.encoder)  # its gradient reached it
+    assert "key_head" in helped.state_dict() and "key_head" not in plain.state_dict()
+    none_yet = {**data, "press_images": data["images"][:0], "press_keys": np.zeros(0, dtype=np.int64)}
+    assert "losses/pressed_key_loss" not in build("dqn", tasks, pressed_key=0.5).update(none_yet)
+    with pytest.raises(ValueError, match="press_frames=True"):
+        build("dqn", tasks, pressed_key=0.5).update(data)
+    with pytest.raises(ValueError, match=r"pressed_key is a loss weight: at least 0, got -1\.0"):
+        build("dqn", tasks, pressed_key=-1.0)
+
+
 def test_a_goal_difference_dqn_learns_its_goals_places(tasks):
     """``goal_difference``: the DQN's Q-network takes the goal through learnt places; an update moves the
     goals' places, which its state holds; a negative size, or one with goal heads, is refused."""

@@ -105,6 +105,37 @@ def test_sampled_images_and_next_images_follow_the_episode():
         assert image.max() == frames[action] and next_image.max() == frames[action + 1]
 
 
+def test_press_frames_are_the_frames_presses_were_made_from_with_the_keys_they_pressed():
+    """Each press frame is the first frame of a transition that pressed a key (the frame PRESS was
+    chosen on), with that key; episodes without a press add none, and before any press there are none."""
+
+    def frame(rows: int, goal: int, achieved: int | None = None) -> dict:  # a binary image: `rows` lit
+        lit = observation(0, goal, achieved)
+        lit["observation"][:rows] = 255
+        return lit
+
+    buffer = EpisodeReplayBuffer(100, GOALS, (), 5, relabel="all", press_frames=True)
+    buffer.start_episode(frame(1, goal=0))
+    buffer.add_step(0, 0.0, frame(2, goal=0), terminated=False)
+    buffer.end_episode()  # a time-out: no press
+    batch = buffer.sample(8, np.random.default_rng(0))
+    assert batch["press_images"].shape == (0, 1, 100, 100) and batch["press_keys"].shape == (0,)
+    for rows, key in ((30, 2), (60, 3)):  # the press is made from `rows`; the frames around it differ
+        buffer.start_episode(frame(rows - 10, goal=1))
+        buffer.add_step(2, 0.0, frame(rows, goal=1), terminated=False)
+        buffer.add_step(4, 0.0, frame(rows + 5, goal=1, achieved=key), terminated=True)
+        buffer.end_episode()
+    batch = buffer.sample(200, np.random.default_rng(1))
+    assert batch["press_images"].shape == (200, 1, 100, 100) and batch["press_keys"].dtype == np.int64
+    lit_rows = (batch["press_images"][:, 0, :, 0] > 0).sum(-1)
+    assert set(zip(lit_rows.tolist(), batch["press_keys"].tolist(), strict=True)) == {(30, 2), (60, 3)}
+    plain = make_buffer()
+    run_episode(plain, goal=1, pressed=2)
+    assert "press_images" not in plain.sample(4, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="discrete actions"):
+        EpisodeReplayBuffer(10, GOALS, (3,), 3, press_frames=True)
+
+
 def shifted(image: np.ndarray, rows: int, columns: int) -> np.ndarray:
     """``image`` (C, H, W) moved by (rows, columns), read pixel by pixel with the indices clipped."""
     _, height, width = image.shape

@@ -13,7 +13,7 @@ import pytest
 
 import toys
 from agents_helpers import read_progress_csv, touch_config, train_module
-from tactile_braille.agents import TrainConfig, train
+from tactile_braille.agents import DQNConfig, TrainConfig, train
 from tactile_braille.agents.config import TRACKS, proprio_settings
 from tactile_braille.agents.presets import PRESET_TRACKS, PRESETS, preset_config
 from tactile_braille.cli import main
@@ -135,6 +135,17 @@ def test_a_tactile_run_learns_identically_when_all_but_its_observations_and_rewa
         assert (plain == scrambled) is same, name
     assert json.loads((tmp_path / "paper-plain" / "config.json").read_text())["track"] == "tactile"
     assert (tmp_path / "odometry-plain" / "touch.json").exists()  # its encoder was fitted, and used
+
+
+def test_a_pressed_key_loss_learns_from_the_observations_alone(env_datasets, tmp_path, monkeypatch):
+    """DQN's pressed-key loss (its labels: the achieved goals) in a training run: the replay serves it
+    press frames, the loss is logged, and scrambling what the environment reports besides the
+    observation dictionary and the reward changes nothing."""
+    config = touch_config(env_datasets, "dqn", track="tactile", touch={"enabled": False}, epochs=2,
+                          agent=DQNConfig(hidden=(16,), batch_size=8, pressed_key=0.5))  # fmt: skip
+    plain = _learnt(config, tmp_path / "plain", monkeypatch, scrambled=False)
+    assert plain == _learnt(config, tmp_path / "scrambled", monkeypatch, scrambled=True)
+    assert any(row["losses/pressed_key_loss"] not in ("", None) for row in plain)
 
 
 def test_a_run_with_pose_inputs_acts_on_the_pose_its_observation_carries(env_datasets, tmp_path):

@@ -70,8 +70,9 @@ def _check_hyperparameters(config) -> None:
         problems.append(f"gamma must be in [0, 1], got {config.gamma}")
     if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
         problems.append(f"tau must be in (0, 1], got {config.tau}")
-    if getattr(config, "inverse_dynamics", 0.0) < 0:
-        problems.append(f"inverse_dynamics is a loss weight: at least 0, got {config.inverse_dynamics}")
+    for name in ("inverse_dynamics", "pressed_key"):
+        if getattr(config, name, 0.0) < 0:
+            problems.append(f"{name} is a loss weight: at least 0, got {getattr(config, name)}")
     for name in ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps", "action_input_scale"):
         if getattr(config, name, 1.0) <= 0:
             problems.append(f"{name} must be positive, got {getattr(config, name)}")
@@ -132,6 +133,11 @@ class DQNConfig:
         inverse_dynamics: the weight of an auxiliary loss on the Q-network's encoder: a head
             predicts each transition's action from the encoder's features of its two frames
             (inverse dynamics; the action is the next observation's previous action). 0: none.
+        pressed_key: the weight of an auxiliary loss on the Q-network's encoder: a linear head
+            names the key under the sensor from the frames PRESS was chosen on, each labelled with
+            the key its press pressed (the achieved goal, an observation: the ``tactile`` track; on
+            the discrete tasks a press does not move). Each update adds a batch of such frames
+            (``batch_size``) beside the TD batch. 0: none.
         goal_difference: the goal leaves the Q-network's input: the dense layers read the
             difference between a learnt place of the observation and one of the goal, of this many
             numbers (:class:`~tactile_braille.agents.networks.GoalDifference`). 0: the goal is an
@@ -158,6 +164,7 @@ class DQNConfig:
     dueling_split: bool = False
     weights_init: WeightsInit = "he"
     inverse_dynamics: float = 0.0
+    pressed_key: float = 0.0
     goal_difference: int = 0
 
     def __post_init__(self) -> None:

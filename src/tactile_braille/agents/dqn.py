@@ -14,6 +14,7 @@ import copy
 import gymnasium as gym
 import numpy as np
 import torch
+from torch import nn
 from torch.nn import functional as F
 
 from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
@@ -68,6 +69,11 @@ class DQNAgent(Agent):
             self.inverse = InverseDynamicsHead(self.q.trunk.encoded, self.num_actions).to(self.device)
             learnt += list(self.inverse.parameters())
             self.checkpointed = (*self.checkpointed, "inverse")
+        self.key_head = None
+        if self.config.pressed_key > 0:
+            self.key_head = nn.Linear(self.q.trunk.encoded, goal_size).to(self.device)
+            learnt += list(self.key_head.parameters())
+            self.checkpointed = (*self.checkpointed, "key_head")
         self.optimiser = adam(learnt, self.config.learning_rate, self.config.adam_eps)
 
     def epsilon(self, step: int) -> float:
@@ -104,7 +110,12 @@ class DQNAgent(Agent):
             q, target = self._all_goals_values(t) if self.config.all_goals else self._values(t)
             loss = self._loss(q, target, t)
             inverse_loss = self._inverse_loss(t) if self.inverse is not None else None
-        total = loss if inverse_loss is None else loss + self.config.inverse_dynamics * inverse_loss
+            key_loss = self._pressed_key_loss(t) if self.key_head is not None else None
+        total = loss
+        if inverse_loss is not None:
+            total = total + self.config.inverse_dynamics * inverse_loss
+        if key_loss is not None:
+            total = total + self.config.pressed_key * key_loss
         self.optimiser.zero_grad(set_to_none=True)
         total.backward()
         self.optimiser.step()
@@ -113,7 +124,21 @@ class DQNAgent(Agent):
         losses = {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
         if inverse_loss is not None:
             losses["losses/inverse_loss"] = inverse_loss.item()
+        if key_loss is not None:
+            losses["losses/pressed_key_loss"] = key_loss.item()
         return losses
+
+    def _pressed_key_loss(self, t: dict[str, torch.Tensor]) -> torch.Tensor | None:
+        """Cross-entropy of the key head's reading of the frames presses were chosen on, against the
+        keys they pressed (the replay's ``press_images`` and ``press_keys``); None before any press."""
+        if "press_keys" not in t:
+            raise ValueError(
+                "pressed_key needs batches with press frames (a replay made with press_frames=True)"
+            )
+        if len(t["press_keys"]) == 0:
+            return None
+        logits = self.key_head(self.q.trunk.encode(t["press_images"])).float()
+        return F.cross_entropy(logits, t["press_keys"])
 
     def _inverse_loss(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
         """Cross-entropy of the inverse-dynamics head's guess of each transition's action, from the

@@ -399,6 +399,10 @@ class EpisodeReplayBuffer:
             transitions, the paper's); above 1 its rewards are discounted by ``gamma``.
         gamma: the agent's discount, needed where ``n_step`` > 1.
         shift: sampled images moved by up to this many pixels (:func:`random_shift`; 0: none).
+        press_frames: batches also carry as many frames that a press was made from
+            (``press_images``, uniformly among the stored transitions that pressed a task key) and
+            the key each press pressed (``press_keys``, its achieved goal); none before the first
+            press. Discrete actions only: there a press does not move, so its frame shows the key.
     """
 
     def __init__(
@@ -418,7 +422,13 @@ class EpisodeReplayBuffer:
         gamma: float | None = None,
         all_goals: bool = False,
         shift: int = 0,
+        press_frames: bool = False,
     ) -> None:
+        if press_frames and action_shape != ():
+            raise ValueError(
+                "press_frames labels the frame a press was made from with its key, which holds for "
+                f"discrete actions (a press does not move), not actions of shape {action_shape}"
+            )
         if shift < 0:
             raise ValueError(f"shift is a number of pixels, at least 0, got {shift}")
         if n_step < 1:
@@ -439,6 +449,7 @@ class EpisodeReplayBuffer:
             )
         self.capacity = int(capacity)
         self.poses, self.all_goals = bool(poses), bool(all_goals)
+        self.press_frames = bool(press_frames)
         self.n_step, self.gamma = int(n_step), gamma
         self.shift = int(shift)
         self.her = her
@@ -609,6 +620,8 @@ class EpisodeReplayBuffer:
             batch["goal_weights"] = self.relabelling.goal_weights(self.goals[index], self.finals[index])
         if self.n_step > 1:
             batch["steps"] = steps
+        if self.press_frames:
+            batch["press_images"], batch["press_keys"] = self._press_frames(batch_size, rng, observations)
         if self.shift:
             if self.cache.features is not None:
                 raise RuntimeError(f"shift={self.shift} moves images, but this replay serves features")
@@ -620,6 +633,18 @@ class EpisodeReplayBuffer:
                 raise RuntimeError("poses=True needs labelled frames, but a sampled frame has no labels")
             batch["poses"], batch["next_poses"] = poses[:, 0], poses[:, 1]
         return batch
+
+    def _press_frames(
+        self, count: int, rng: np.random.Generator, observations
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``count`` frames that presses were made from, drawn uniformly among the stored presses, and the
+        keys they pressed (int64); empty before the first press."""
+        presses = np.flatnonzero(self.achieved[: self.size] >= 0)
+        if len(presses) == 0:
+            empty = observations(np.zeros(0, dtype=np.int64))
+            return empty, np.zeros(0, dtype=np.int64)
+        index = presses[rng.integers(len(presses), size=count)]
+        return observations(self.frame_index[index, 0]), self.achieved[index].astype(np.int64)
 
     def _n_step_returns(
         self, index: np.ndarray, goals: np.ndarray, rewards: np.ndarray

@@ -35,7 +35,8 @@ PROGRESS_FILE = "progress.csv"
 PROGRESS_FIELDS = (
     "epoch", "env_steps", "updates", "train/episodes", "train/episodic_return", "test/episodic_return",
     "test/episode_length", "test/success_rate", "losses/q_loss", "losses/q_values", "losses/qf_loss",
-    "losses/actor_loss", "losses/alpha", "losses/entropy", "losses/inverse_loss", "charts/SPS", "time_s",
+    "losses/actor_loss", "losses/alpha", "losses/entropy", "losses/inverse_loss", "losses/pressed_key_loss",
+    "charts/SPS", "time_s",
 )  # fmt: skip
 
 
