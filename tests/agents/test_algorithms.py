@@ -663,6 +663,27 @@ def test_a_pressed_key_loss_trains_the_q_networks_encoder_to_name_the_pressed_ke
         build("dqn", tasks, pressed_key=-1.0)
 
 
+def test_a_return_bound_lifts_each_target_to_at_least_its_episodes_return(tasks):
+    """With ``return_bound`` the double-DQN target is the larger of the one-step target and the batch's
+    return bound, for the same networks; without it the bounds are ignored; all goals are refused."""
+    data = make_batch("dqn", tasks, size=16)
+    data["return_bounds"] = np.where(np.arange(16) % 2 == 0, 0.9, 0.0).astype(np.float32)
+    bounded, plain = build("dqn", tasks, return_bound=True), build("dqn", tasks)
+    for agent in (plain, bounded):  # the same weights, away from zero
+        agent.q.load_state_dict(build("dqn", tasks, seed=3).q.state_dict())
+        agent.target.load_state_dict(agent.q.state_dict())
+    with torch.no_grad():
+        _, lifted = bounded._values(bounded.tensors(data))
+        _, one_step = plain._values(plain.tensors(data))
+    bounds = torch.as_tensor(data["return_bounds"])
+    assert torch.equal(lifted, torch.maximum(one_step, bounds))
+    assert (lifted > one_step).any() and torch.equal(lifted[bounds == 0], one_step[bounds == 0])
+    with pytest.raises(ValueError, match="return_bounds=True"):
+        bounded.update(make_batch("dqn", tasks))
+    with pytest.raises(ValueError, match="return_bound bounds the sampled goal's target"):
+        build("dqn", tasks, return_bound=True, all_goals=True)
+
+
 def test_a_goal_difference_dqn_learns_its_goals_places(tasks):
     """``goal_difference``: the DQN's Q-network takes the goal through learnt places; an update moves the
     goals' places, which its state holds; a negative size, or one with goal heads, is refused."""

@@ -136,6 +136,28 @@ def test_press_frames_are_the_frames_presses_were_made_from_with_the_keys_they_p
         EpisodeReplayBuffer(10, GOALS, (3,), 3, press_frames=True)
 
 
+def test_return_bounds_are_the_discounted_return_of_the_transitions_own_episode(tmp_path):
+    """gamma ** k where the episode pressed the batch goal's key k steps after the transition, else 0;
+    a saved and loaded buffer gives the same bounds (it keeps the steps remaining)."""
+    buffer = EpisodeReplayBuffer(100, GOALS, (), 5, her=False, gamma=0.5, return_bounds=True)
+    run_episode(buffer, goal=2, pressed=2, steps=3)  # actions 0, 1, 2: pressed 2 steps after the first
+    run_episode(buffer, goal=1, pressed=3, steps=2)  # a wrong press: no bound under goal 1
+    run_episode(buffer, goal=0, pressed=None, steps=2)  # a time-out: no bound
+    batch = buffer.sample(300, np.random.default_rng(0))
+    goals, actions = batch["goals"].argmax(-1), batch["actions"]
+    expected = np.where(goals == 2, 0.5 ** (2 - actions), 0.0)
+    np.testing.assert_allclose(batch["return_bounds"], expected)
+    assert set(np.unique(goals)) == {0, 1, 2} and batch["return_bounds"].dtype == np.float32
+    buffer.save(tmp_path / "replay.npz")
+    again = EpisodeReplayBuffer(100, GOALS, (), 5, her=False, gamma=0.5, return_bounds=True)
+    again.load(tmp_path / "replay.npz")
+    np.testing.assert_array_equal(
+        again.sample(300, np.random.default_rng(0))["return_bounds"], batch["return_bounds"]
+    )
+    with pytest.raises(ValueError, match="return bounds need the agent's discount"):
+        EpisodeReplayBuffer(10, GOALS, (), 5, return_bounds=True)
+
+
 def shifted(image: np.ndarray, rows: int, columns: int) -> np.ndarray:
     """``image`` (C, H, W) moved by (rows, columns), read pixel by pixel with the indices clipped."""
     _, height, width = image.shape

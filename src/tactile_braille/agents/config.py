@@ -138,6 +138,12 @@ class DQNConfig:
             the key its press pressed (the achieved goal, an observation: the ``tactile`` track; on
             the discrete tasks a press does not move). Each update adds a batch of such frames
             (``batch_size``) beside the TD batch. 0: none.
+        return_bound: each TD target is at least the discounted return the transition's own
+            episode went on to get under its (relabelled) goal: ``gamma ** k`` where that episode
+            pressed the goal key ``k`` steps later. The moves are deterministic, so it is a lower
+            bound of the optimal value (optimality tightening, He et al. 2017), and a press
+            teaches every step before it at once where one-step targets spread it a step per
+            target update. Single-goal updates only.
         goal_difference: the goal leaves the Q-network's input: the dense layers read the
             difference between a learnt place of the observation and one of the goal, of this many
             numbers (:class:`~tactile_braille.agents.networks.GoalDifference`). 0: the goal is an
@@ -165,6 +171,7 @@ class DQNConfig:
     weights_init: WeightsInit = "he"
     inverse_dynamics: float = 0.0
     pressed_key: float = 0.0
+    return_bound: bool = False
     goal_difference: int = 0
 
     def __post_init__(self) -> None:
@@ -173,6 +180,8 @@ class DQNConfig:
             raise ValueError(f"goal_difference is a size: at least 0, got {self.goal_difference}")
         if self.goal_difference and self.goal_heads:
             raise ValueError("goal_difference and goal_heads each take the goal from the input: choose one")
+        if self.return_bound and self.all_goals:
+            raise ValueError("return_bound bounds the sampled goal's target; all_goals computes every goal's")
 
 
 @dataclass(frozen=True)

@@ -165,6 +165,10 @@ class DQNAgent(Agent):
             next_target = self.target(t["next_images"], t["goals"], t["next_previous_actions"])
             next_value = next_target.gather(-1, next_action).squeeze(-1).float()
             target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
+            if self.config.return_bound:
+                if "return_bounds" not in t:
+                    raise ValueError("return_bound needs batches with 'return_bounds' (return_bounds=True)")
+                target = torch.maximum(target, t["return_bounds"])
         q_all = self.q(t["images"], t["goals"], t["previous_actions"])
         return chosen(q_all, t["actions"]).float(), target
 

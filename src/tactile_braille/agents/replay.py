@@ -403,6 +403,10 @@ class EpisodeReplayBuffer:
             (``press_images``, uniformly among the stored transitions that pressed a task key) and
             the key each press pressed (``press_keys``, its achieved goal); none before the first
             press. Discrete actions only: there a press does not move, so its frame shows the key.
+        return_bounds: batches also carry ``return_bounds``: the discounted return each sampled
+            transition's own episode went on to get under the transition's batch goal,
+            ``gamma ** k`` where the episode pressed that goal key ``k`` steps after it, else 0 (a
+            lower bound of the optimal value where moves are deterministic; needs ``gamma``).
     """
 
     def __init__(
@@ -423,7 +427,10 @@ class EpisodeReplayBuffer:
         all_goals: bool = False,
         shift: int = 0,
         press_frames: bool = False,
+        return_bounds: bool = False,
     ) -> None:
+        if return_bounds and (gamma is None or not 0 <= gamma <= 1):
+            raise ValueError(f"return bounds need the agent's discount gamma in [0, 1], got {gamma}")
         if press_frames and action_shape != ():
             raise ValueError(
                 "press_frames labels the frame a press was made from with its key, which holds for "
@@ -449,7 +456,7 @@ class EpisodeReplayBuffer:
             )
         self.capacity = int(capacity)
         self.poses, self.all_goals = bool(poses), bool(all_goals)
-        self.press_frames = bool(press_frames)
+        self.press_frames, self.return_bounds = bool(press_frames), bool(return_bounds)
         self.n_step, self.gamma = int(n_step), gamma
         self.shift = int(shift)
         self.her = her
@@ -620,6 +627,8 @@ class EpisodeReplayBuffer:
             batch["goal_weights"] = self.relabelling.goal_weights(self.goals[index], self.finals[index])
         if self.n_step > 1:
             batch["steps"] = steps
+        if self.return_bounds:
+            batch["return_bounds"] = self._return_bounds(index, goals)
         if self.press_frames:
             batch["press_images"], batch["press_keys"] = self._press_frames(batch_size, rng, observations)
         if self.shift:
@@ -633,6 +642,13 @@ class EpisodeReplayBuffer:
                 raise RuntimeError("poses=True needs labelled frames, but a sampled frame has no labels")
             batch["poses"], batch["next_poses"] = poses[:, 0], poses[:, 1]
         return batch
+
+    def _return_bounds(self, index: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """``gamma ** k`` for each sampled transition whose episode pressed its batch goal's key ``k`` steps
+        after it (its ``finals`` and ``remaining``), else 0 (float32)."""
+        goal = np.where(goals.any(-1), goals.argmax(-1), -1)
+        pressed = (self.finals[index] == goal) & (goal >= 0)
+        return np.where(pressed, np.float32(self.gamma) ** self.remaining[index], 0.0).astype(np.float32)
 
     def _press_frames(
         self, count: int, rng: np.random.Generator, observations
@@ -713,9 +729,9 @@ class EpisodeReplayBuffer:
 
     @property
     def _saved(self) -> tuple[str, ...]:
-        """The transition arrays a checkpoint holds: ``remaining`` only where n-step returns read it,
-        so that one-step buffers write the files they always wrote."""
-        return self._TRANSITIONS + (("remaining",) if self.n_step > 1 else ())
+        """The transition arrays a checkpoint holds: ``remaining`` only where n-step returns or return
+        bounds read it, so that other buffers write the files they always wrote."""
+        return self._TRANSITIONS + (("remaining",) if self.n_step > 1 or self.return_bounds else ())
 
     def save(self, path: str | Path) -> None:
         """Write the used part of the buffer (committed transitions) atomically as ``.npz``.

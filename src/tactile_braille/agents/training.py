@@ -339,4 +339,5 @@ def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
         all_goals=getattr(config.agent, "all_goals", False),
         shift=config.replay.shift,
         press_frames=getattr(config.agent, "pressed_key", 0.0) > 0,
+        return_bounds=getattr(config.agent, "return_bound", False),
     )
