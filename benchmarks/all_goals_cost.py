@@ -40,12 +40,30 @@ def update_ms(agent, batches: list[dict]) -> float:
     return (time.perf_counter() - start) / len(batches) * 1e3
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--updates", type=int, default=10, help="updates per timing")
-    parser.add_argument("--rounds", type=int, default=5, help="alternating timings of each variant")
+def timing_arguments(doc: str, updates: int, rounds: int) -> argparse.Namespace:
+    """The command line of a script that times variants of an update side by side (one torch thread)."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--updates", type=int, default=updates, help="updates per timing")
+    parser.add_argument("--rounds", type=int, default=rounds, help="alternating timings of each variant")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    return args
+
+
+def alternating_ms(agents: dict, batches: list[dict], rounds: int, warm_up: int = 2) -> dict:
+    """Median milliseconds an update of each agent takes, the agents timed in turn ``rounds`` times (a
+    shared, noisy machine slows each alike), after ``warm_up`` updates each."""
+    for agent in agents.values():
+        update_ms(agent, batches[:warm_up])
+    times: dict = {key: [] for key in agents}
+    for _ in range(rounds):
+        for key, agent in agents.items():
+            times[key].append(update_ms(agent, batches))
+    return {key: statistics.median(values) for key, values in times.items()}
+
+
+def main() -> None:
+    args = timing_arguments(__doc__, updates=10, rounds=5)
     print(f"{'agent':<14}{'task':<22}{'single goal':>13}{'all goals':>11}{'ratio':>7}")
     for algo, task in CASES:
         config = preset_config("paper", task, algo, precision="bf16")
@@ -57,13 +75,8 @@ def main() -> None:
             every: make_agent(dataclasses.replace(config, agent=agent), env)
             for every, agent in variants.items()
         }
-        for agent in agents.values():
-            update_ms(agent, batches[:2])  # warm-up
-        times = {every: [] for every in agents}
-        for _ in range(args.rounds):
-            for every, agent in agents.items():
-                times[every].append(update_ms(agent, batches))
-        single, every = (statistics.median(times[key]) for key in (False, True))
+        medians = alternating_ms(agents, batches, args.rounds)
+        single, every = medians[False], medians[True]
         print(f"{algo:<14}{task.split('/')[1]:<22}{single:>10.1f} ms{every:>8.1f} ms{every / single:>7.2f}")
         env.close()
 

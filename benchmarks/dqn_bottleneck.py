@@ -10,6 +10,8 @@ of its ``checkpoint.pt`` taken at several epochs) this measures two things:
   and under its own key as the goal the greedy action should be PRESS (the
   *hit* rate) while under any other goal it should not (the *false press*
   rate). The labels score the network here only; training never sees them.
+  Beside it, the share of the last dense layer's ReLU units that are active
+  (over the taps and goals): a Q-network whose units have died reads no image.
 - **control**: test episodes as the protocol runs them (random start and
   goal, greedy actions), split by how they end: the goal pressed, another
   key pressed, or the time limit reached without a press; and the steps of
@@ -47,11 +49,13 @@ MOVES = {0: (-1, 0), 1: (1, 0), 2: (0, -1), 3: (0, 1)}
 def perception(agent, images: np.ndarray, keys: np.ndarray, goal_size: int) -> dict[str, float]:
     """The PRESS column as a classifier of ``images`` (N, 100, 100) whose key under the sensor is ``keys``
     (N,; goal indices), and the greedy action's hit and false-press rates."""
-    reads, hits, false_presses = [], [], []
+    reads, hits, false_presses, active = [], [], [], []
     for chunk in np.array_split(np.arange(len(images)), max(1, len(images) // 256)):
         batch = torch.as_tensor(images[chunk][:, None])
         previous = torch.zeros(len(chunk), agent.num_actions)
         q = agent.q.every_goal(batch, previous).float()  # (N, goals, actions): one encoder pass
+        hidden = agent.q.trunk.every_goal(batch, previous, goal_size)  # the last dense layer's ReLUs
+        active.append(float((hidden > 0).float().mean()))
         reads.append(q[:, :, PRESS].argmax(-1).numpy())
         greedy_presses = (q.argmax(-1) == PRESS).numpy()  # (N, G)
         own = np.zeros_like(greedy_presses)
@@ -62,6 +66,7 @@ def perception(agent, images: np.ndarray, keys: np.ndarray, goal_size: int) -> d
         "read": float(np.mean(np.concatenate(reads) == keys)),
         "hit": float(np.mean(np.concatenate(hits))),
         "false_press": float(np.mean(np.concatenate(false_presses))),
+        "active": float(np.mean(active)),
     }
 
 
@@ -133,17 +138,20 @@ def main() -> None:
     taps = np.flatnonzero(np.isin(names, goal_keys))
     images = data.observations[taps].reshape(len(taps), 100, 100)
     keys = np.array([goal_keys.index(name) for name in names[taps]])
-    print(f"| epoch | PRESS column reads the key ({args.dataset}) | presses its own key | presses another "
-          f"| test: right | wrong key | time-out | extra steps (right) |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|")
+    columns = [
+        "epochs done", f"PRESS column reads the key ({args.dataset})", "presses its own key",
+        "presses another", "active units", "test: right", "wrong key", "time-out", "extra steps (right)",
+    ]  # fmt: skip
+    print("| " + " | ".join(columns) + " |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for path in args.checkpoints or [args.run / "checkpoint.pt"]:
         state = torch.load(path, weights_only=False, map_location="cpu")
         agent.load_state_dict(state["agent"])
         seen = perception(agent, images, keys, len(goal_keys))
         ended = control(agent, env, args.episodes, args.seed)
         print(f"| {state['epoch']} | {seen['read']:.3f} | {seen['hit']:.3f} | {seen['false_press']:.3f} "
-              f"| {ended['right']:.2f} | {ended['wrong']:.2f} | {ended['timeout']:.2f} "
-              f"| {ended['excess_steps']:.1f} |")  # fmt: skip
+              f"| {seen['active']:.3f} | {ended['right']:.2f} | {ended['wrong']:.2f} "
+              f"| {ended['timeout']:.2f} | {ended['excess_steps']:.1f} |")  # fmt: skip
 
 
 if __name__ == "__main__":

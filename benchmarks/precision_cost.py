@@ -16,15 +16,13 @@ the figure to read.
 
 from __future__ import annotations
 
-import argparse
-import statistics
 import warnings
 
 import numpy as np
 import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
-from all_goals_cost import update_ms  # this folder's
+from all_goals_cost import alternating_ms, timing_arguments  # this folder's
 from tactile_braille.agents import preset_config
 from tactile_braille.agents.common import native_bf16
 from tactile_braille.agents.training import make_agent, make_env
@@ -40,11 +38,7 @@ CASES = (
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--updates", type=int, default=5, help="updates per timing")
-    parser.add_argument("--rounds", type=int, default=3, help="alternating timings of each precision")
-    args = parser.parse_args()
-    torch.set_num_threads(1)
+    args = timing_arguments(__doc__, updates=5, rounds=3)
     print(f"CPU: {torch.backends.cpu.get_cpu_capability()} kernels; native bf16: {native_bf16('cpu')}")
     print(f"{'preset':<10}{'agent':<14}{'task':<22}{'fp32':>10}{'bf16':>11}{'bf16/fp32':>11}")
     for preset, algo, task in CASES:
@@ -57,13 +51,8 @@ def main() -> None:
                 precision: make_agent(preset_config(preset, task, algo, precision=precision), env)
                 for precision in ("fp32", "bf16")
             }
-        for agent in agents.values():
-            update_ms(agent, batches[:1])  # warm-up
-        times: dict[str, list[float]] = {precision: [] for precision in agents}
-        for _ in range(args.rounds):
-            for precision, agent in agents.items():
-                times[precision].append(update_ms(agent, batches))
-        fp32, bf16 = (statistics.median(times[precision]) for precision in ("fp32", "bf16"))
+        medians = alternating_ms(agents, batches, args.rounds, warm_up=1)
+        fp32, bf16 = medians["fp32"], medians["bf16"]
         name = task.split("/")[1]
         print(f"{preset:<10}{algo:<14}{name:<22}{fp32:>7.0f} ms{bf16:>8.0f} ms{bf16 / fp32:>11.2f}")
         env.close()

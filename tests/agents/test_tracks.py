@@ -141,7 +141,7 @@ def test_a_pressed_key_loss_learns_from_the_observations_alone(env_datasets, tmp
     """DQN's pressed-key loss (its labels: the achieved goals) in a training run: the replay serves it
     press frames, the loss is logged, and scrambling what the environment reports besides the
     observation dictionary and the reward changes nothing."""
-    config = touch_config(env_datasets, "dqn", track="tactile", touch={"enabled": False}, epochs=2,
+    config = touch_config(env_datasets, "dqn", track="tactile", touch={"enabled": False},
                           agent=DQNConfig(hidden=(16,), batch_size=8, pressed_key=0.5))  # fmt: skip
     plain = _learnt(config, tmp_path / "plain", monkeypatch, scrambled=False)
     assert plain == _learnt(config, tmp_path / "scrambled", monkeypatch, scrambled=True)
