@@ -81,8 +81,12 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = 0, ["0"]
         if name == "agent.goal_difference":  # given as its default: it refuses goal heads (test_algorithms)
             value, words = 0, ["0"]
-        if name == "agent.return_bound":  # given as its default: it refuses all-goals updates (test_algorithms)
+        if (
+            name == "agent.return_bound"
+        ):  # given as its default: it refuses all-goals updates (test_algorithms)
             value, words = False, None
+        if name == "agent.return_bound_after":  # given as its default: it needs return_bound
+            value, words = 0, ["0"]
         if name == "touch.goal_positions":  # given as its default: all-goals updates refuse goal positions
             value, words = False, None
         flag = "--" + name.replace("_", "-")

@@ -680,6 +680,10 @@ def test_a_return_bound_lifts_each_target_to_at_least_its_episodes_return(tasks)
     assert (lifted > one_step).any() and torch.equal(lifted[bounds == 0], one_step[bounds == 0])
     with pytest.raises(ValueError, match="return_bounds=True"):
         bounded.update(make_batch("dqn", tasks))
+    with pytest.raises(
+        ValueError, match="return_bound_after=10 is a number of transitions, at least 0, and needs"
+    ):
+        build("dqn", tasks, return_bound_after=10)
     with pytest.raises(ValueError, match="return_bound bounds the sampled goal's target"):
         build("dqn", tasks, return_bound=True, all_goals=True)
 

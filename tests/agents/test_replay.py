@@ -154,6 +154,13 @@ def test_return_bounds_are_the_discounted_return_of_the_transitions_own_episode(
     np.testing.assert_array_equal(
         again.sample(300, np.random.default_rng(0))["return_bounds"], batch["return_bounds"]
     )
+    late = EpisodeReplayBuffer(
+        100, GOALS, (), 5, her=False, gamma=0.5, return_bounds=True, return_bounds_after=6
+    )
+    run_episode(late, goal=2, pressed=2, steps=3)
+    assert not late.sample(50, np.random.default_rng(0))["return_bounds"].any()  # 3 transitions of 6
+    run_episode(late, goal=2, pressed=2, steps=3)
+    assert late.sample(50, np.random.default_rng(0))["return_bounds"].max() == 1.0  # 6: the bounds apply
     with pytest.raises(ValueError, match="return bounds need the agent's discount"):
         EpisodeReplayBuffer(10, GOALS, (), 5, return_bounds=True)
 

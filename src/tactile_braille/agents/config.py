@@ -144,6 +144,9 @@ class DQNConfig:
             bound of the optimal value (optimality tightening, He et al. 2017), and a press
             teaches every step before it at once where one-step targets spread it a step per
             target update. Single-goal updates only.
+        return_bound_after: the bound applies once the replay holds this many transitions (about
+            as many environment steps; 0: from the start), so that the presses of the first
+            epochs, which teach the key under the sensor, come before moving is made to pay.
         goal_difference: the goal leaves the Q-network's input: the dense layers read the
             difference between a learnt place of the observation and one of the goal, of this many
             numbers (:class:`~tactile_braille.agents.networks.GoalDifference`). 0: the goal is an
@@ -172,6 +175,7 @@ class DQNConfig:
     inverse_dynamics: float = 0.0
     pressed_key: float = 0.0
     return_bound: bool = False
+    return_bound_after: int = 0
     goal_difference: int = 0
 
     def __post_init__(self) -> None:
@@ -180,6 +184,10 @@ class DQNConfig:
             raise ValueError(f"goal_difference is a size: at least 0, got {self.goal_difference}")
         if self.goal_difference and self.goal_heads:
             raise ValueError("goal_difference and goal_heads each take the goal from the input: choose one")
+        if self.return_bound_after < 0 or (self.return_bound_after and not self.return_bound):
+            after = self.return_bound_after
+            raise ValueError(f"return_bound_after={after} is a number of transitions, at least 0, and needs "
+                             "return_bound")  # fmt: skip
         if self.return_bound and self.all_goals:
             raise ValueError("return_bound bounds the sampled goal's target; all_goals computes every goal's")
 

@@ -407,6 +407,7 @@ class EpisodeReplayBuffer:
             transition's own episode went on to get under the transition's batch goal,
             ``gamma ** k`` where the episode pressed that goal key ``k`` steps after it, else 0 (a
             lower bound of the optimal value where moves are deterministic; needs ``gamma``).
+        return_bounds_after: the bounds are 0 until the buffer holds this many transitions.
     """
 
     def __init__(
@@ -428,6 +429,7 @@ class EpisodeReplayBuffer:
         shift: int = 0,
         press_frames: bool = False,
         return_bounds: bool = False,
+        return_bounds_after: int = 0,
     ) -> None:
         if return_bounds and (gamma is None or not 0 <= gamma <= 1):
             raise ValueError(f"return bounds need the agent's discount gamma in [0, 1], got {gamma}")
@@ -457,6 +459,7 @@ class EpisodeReplayBuffer:
         self.capacity = int(capacity)
         self.poses, self.all_goals = bool(poses), bool(all_goals)
         self.press_frames, self.return_bounds = bool(press_frames), bool(return_bounds)
+        self.return_bounds_after = int(return_bounds_after)
         self.n_step, self.gamma = int(n_step), gamma
         self.shift = int(shift)
         self.her = her
@@ -647,7 +650,7 @@ class EpisodeReplayBuffer:
         """``gamma ** k`` for each sampled transition whose episode pressed its batch goal's key ``k`` steps
         after it (its ``finals`` and ``remaining``), else 0 (float32)."""
         goal = np.where(goals.any(-1), goals.argmax(-1), -1)
-        pressed = (self.finals[index] == goal) & (goal >= 0)
+        pressed = (self.finals[index] == goal) & (goal >= 0) & (self.size >= self.return_bounds_after)
         return np.where(pressed, np.float32(self.gamma) ** self.remaining[index], 0.0).astype(np.float32)
 
     def _press_frames(
