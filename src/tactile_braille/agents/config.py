@@ -143,10 +143,12 @@ class DQNConfig:
             pressed the goal key ``k`` steps later. The moves are deterministic, so it is a lower
             bound of the optimal value (optimality tightening, He et al. 2017), and a press
             teaches every step before it at once where one-step targets spread it a step per
-            target update. Single-goal updates only.
+            target update. Elsewhere the bound is 0, which floors the targets at 0 (no reward is
+            negative). Single-goal updates only.
         return_bound_after: the bound applies once the replay holds this many transitions (about
-            as many environment steps; 0: from the start), so that the presses of the first
-            epochs, which teach the key under the sensor, come before moving is made to pay.
+            as many environment steps; 0: from the start; before it the targets are still floored at
+            0), so that the presses of the first epochs, which teach the key under the sensor, come
+            before moving is made to pay.
         goal_difference: the goal leaves the Q-network's input: the dense layers read the
             difference between a learnt place of the observation and one of the goal, of this many
             numbers (:class:`~tactile_braille.agents.networks.GoalDifference`). 0: the goal is an
