@@ -11,7 +11,10 @@ of its ``checkpoint.pt`` taken at several epochs) this measures two things:
   *hit* rate) while under any other goal it should not (the *false press*
   rate). The labels score the network here only; training never sees them.
   Beside it, the share of the last dense layer's ReLU units that are active
-  (over the taps and goals): a Q-network whose units have died reads no image.
+  (over the taps and goals): a Q-network whose units have died reads no image;
+  how much the goal moves the PRESS value (its spread over the goals, for
+  each tap): one that does not read the goal presses everywhere alike; and
+  the norm of the encoder's features, beside which the goal one-hot joins.
 - **control**: test episodes as the protocol runs them (random start and
   goal, greedy actions), split by how they end: the goal pressed, another
   key pressed, or the time limit reached without a press; and the steps of
@@ -49,13 +52,15 @@ MOVES = {0: (-1, 0), 1: (1, 0), 2: (0, -1), 3: (0, 1)}
 def perception(agent, images: np.ndarray, keys: np.ndarray, goal_size: int) -> dict[str, float]:
     """The PRESS column as a classifier of ``images`` (N, 100, 100) whose key under the sensor is ``keys``
     (N,; goal indices), and the greedy action's hit and false-press rates."""
-    reads, hits, false_presses, active = [], [], [], []
+    reads, hits, false_presses, active, goal_spread, norms = [], [], [], [], [], []
     for chunk in np.array_split(np.arange(len(images)), max(1, len(images) // 256)):
         batch = torch.as_tensor(images[chunk][:, None])
         previous = torch.zeros(len(chunk), agent.num_actions)
         q = agent.q.every_goal(batch, previous).float()  # (N, goals, actions): one encoder pass
         hidden = agent.q.trunk.every_goal(batch, previous, goal_size)  # the last dense layer's ReLUs
         active.append(float((hidden > 0).float().mean()))
+        goal_spread.append(float(q[:, :, PRESS].std(dim=1).mean()))  # how much the goal moves PRESS
+        norms.append(float(agent.q.trunk.encode(batch).norm(dim=1).mean()))
         reads.append(q[:, :, PRESS].argmax(-1).numpy())
         greedy_presses = (q.argmax(-1) == PRESS).numpy()  # (N, G)
         own = np.zeros_like(greedy_presses)
@@ -67,6 +72,8 @@ def perception(agent, images: np.ndarray, keys: np.ndarray, goal_size: int) -> d
         "hit": float(np.mean(np.concatenate(hits))),
         "false_press": float(np.mean(np.concatenate(false_presses))),
         "active": float(np.mean(active)),
+        "goal_spread": float(np.mean(goal_spread)),
+        "feature_norm": float(np.mean(norms)),
     }
 
 
@@ -140,17 +147,19 @@ def main() -> None:
     keys = np.array([goal_keys.index(name) for name in names[taps]])
     columns = [
         "epochs done", f"PRESS column reads the key ({args.dataset})", "presses its own key",
-        "presses another", "active units", "test: right", "wrong key", "time-out", "extra steps (right)",
+        "presses another", "active units", "PRESS spread over goals", "feature norm", "test: right",
+        "wrong key", "time-out", "extra steps (right)",
     ]  # fmt: skip
     print("| " + " | ".join(columns) + " |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|" + "---|" * len(columns))
     for path in args.checkpoints or [args.run / "checkpoint.pt"]:
         state = torch.load(path, weights_only=False, map_location="cpu")
         agent.load_state_dict(state["agent"])
         seen = perception(agent, images, keys, len(goal_keys))
         ended = control(agent, env, args.episodes, args.seed)
         print(f"| {state['epoch']} | {seen['read']:.3f} | {seen['hit']:.3f} | {seen['false_press']:.3f} "
-              f"| {seen['active']:.3f} | {ended['right']:.2f} | {ended['wrong']:.2f} "
+              f"| {seen['active']:.3f} | {seen['goal_spread']:.4f} | {seen['feature_norm']:.1f} "
+              f"| {ended['right']:.2f} | {ended['wrong']:.2f} "
               f"| {ended['timeout']:.2f} | {ended['excess_steps']:.1f} |")  # fmt: skip
 
 
