@@ -663,6 +663,20 @@ def test_a_pressed_key_loss_trains_the_q_networks_encoder_to_name_the_pressed_ke
         build("dqn", tasks, pressed_key=-1.0)
 
 
+def test_unit_features_keep_the_q_networks_image_features_at_unit_length(tasks):
+    """``unit_features``: the trunk's image features (what the key head and the dense layers read) have
+    length 1 whatever the encoder's scale, in the online and the target network; by default they do not."""
+    agent, plain = build("dqn", tasks, unit_features=True, pressed_key=0.5), build("dqn", tasks)
+    images = torch.as_tensor(make_batch("dqn", tasks)["images"])
+    with torch.no_grad():
+        for parameter in agent.q.trunk.encoder.parameters():
+            parameter.mul_(3.0)  # an encoder grown by an auxiliary loss
+        for network in (agent.q, agent.target):
+            lengths = network.trunk.encode(images).norm(dim=-1)
+            assert torch.allclose(lengths, torch.ones_like(lengths), atol=1e-5)
+        assert not torch.allclose(plain.q.trunk.encode(images).norm(dim=-1), torch.ones(len(images)))
+
+
 def test_a_return_bound_lifts_each_target_to_at_least_its_episodes_return(tasks):
     """With ``return_bound`` the double-DQN target is the larger of the one-step target and the batch's
     return bound, for the same networks; without it the bounds are ignored; all goals are refused."""

@@ -50,7 +50,10 @@ def network_options(observation_space: gym.spaces.Dict, config) -> tuple[dict, d
     shape = observation_space["observation"].shape
     if len(shape) == 3 and shape[-1] > 1:
         actor["channels"] = int(shape[-1])
-    return actor, {**actor, "layer_norm": bool(getattr(config, "layer_norm", False))}
+    critic = {**actor, "layer_norm": bool(getattr(config, "layer_norm", False))}
+    if getattr(config, "unit_features", False):
+        critic["unit_features"] = True
+    return actor, critic
 
 
 POSE_SIZE = 3

@@ -116,6 +116,9 @@ class DQNConfig:
         batch_size: transitions per update.
         hidden: units of the dense layers after the encoder.
         layer_norm: LayerNorm in the Q-network's dense layers (as DroQ's critics).
+        unit_features: the Q-network's image features are scaled to unit length before the goal
+            and the previous action join them (an auxiliary loss on the encoder, such as
+            ``pressed_key``'s, otherwise grows them until the goal has no say).
         all_goals: every update teaches every goal (Kaelbling's all-goals update): each sampled
             transition's target is computed for each goal from its pressed key (the achieved
             goal, an observation) and the reward rule; the episode's end does not depend on the
@@ -169,6 +172,7 @@ class DQNConfig:
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
+    unit_features: bool = False
     all_goals: bool = False
     all_goals_weights: GoalWeights = "uniform"
     goal_heads: bool = False

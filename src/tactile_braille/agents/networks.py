@@ -51,6 +51,8 @@ class GoalConditionedTrunk(nn.Module):
         layer_norm: a LayerNorm before each dense layer's ReLU.
         channels: channels of the image its own encoder reads (more than one: stacked taps,
             :class:`~tactile_braille.envs.memory.TapMemory`).
+        unit_features: the encoder's features are scaled to unit length before the vectors join
+            them, so that a loss that grows them (an auxiliary head's) cannot drown the goal.
     """
 
     def __init__(
@@ -61,8 +63,10 @@ class GoalConditionedTrunk(nn.Module):
         features: int | None = None,
         layer_norm: bool = False,
         channels: int = 1,
+        unit_features: bool = False,
     ):
         super().__init__()
+        self.unit_features = bool(unit_features)
         if not hidden or min(hidden) < 1:
             raise ValueError(f"hidden needs at least one positive layer size, got {hidden}")
         if features is not None and (features < 1 or encoder is not None):
@@ -91,10 +95,12 @@ class GoalConditionedTrunk(nn.Module):
     def encode(self, images: torch.Tensor) -> torch.Tensor:
         """The features the dense layers take before the vectors: the encoder's, or the vector given."""
         if self._shared:
-            return self._shared[0](images).detach()
-        if self.encoder is not None:
-            return self.encoder(images)
-        return images.float()
+            features = self._shared[0](images).detach()
+        elif self.encoder is not None:
+            features = self.encoder(images)
+        else:
+            return images.float()
+        return F.normalize(features, dim=-1) if self.unit_features else features
 
     def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:
         return self.dense(torch.cat([self.encode(images), *vectors], dim=-1))
