@@ -1,4 +1,5 @@
-"""The paper's agents with Hindsight Experience Replay: double + dueling DQN, discrete SAC, SAC, TD3.
+"""The paper's agents with Hindsight Experience Replay: double + dueling DQN, discrete SAC, SAC, TD3;
+and ours, the key-graph planner.
 
 Names are imported on first use, so that ``tactile_braille.agents.config`` (the
 settings, which the command line is generated from) loads without torch.
@@ -25,10 +26,12 @@ _EXPORTS = {
     "DiscreteSACConfig": "config",
     "SACConfig": "config",
     "TD3Config": "config",
+    "PlannerConfig": "config",
     "DQNAgent": "dqn",
     "DiscreteSACAgent": "sac_discrete",
     "SACAgent": "sac",
     "TD3Agent": "td3",
+    "PlannerAgent": "planner",
 }
 __all__ = sorted(_EXPORTS)
 

@@ -164,6 +164,11 @@ class Agent:
         batch holds n-step returns (a buffer with ``n_step`` > 1: its batches carry ``steps``)."""
         return self.config.gamma if "steps" not in t else self.config.gamma ** t["steps"]
 
+    def sample(self, buffer, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """What an update learns from: a batch of the replay's transitions (a model-based agent, the
+        planner, reads its own from the replay)."""
+        return buffer.sample(batch_size, rng)
+
     def end_epoch(self) -> None:
         """Called by the training loop after each epoch's steps and updates, before its test."""
 

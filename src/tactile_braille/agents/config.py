@@ -33,7 +33,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal, Union
 
-Algorithm = Literal["dqn", "sac_discrete", "sac", "td3"]
+Algorithm = Literal["dqn", "sac_discrete", "sac", "td3", "planner"]
 Backend = Literal["dataset", "render", "rig"]
 Edges = Literal["stop", "overrun"]
 TapDepth = Literal["commanded", "released"]
@@ -357,12 +357,97 @@ class TD3Config:
         _check_hyperparameters(self)
 
 
-AgentConfig = Union[DQNConfig, DiscreteSACConfig, SACConfig, TD3Config]  # noqa: UP007 - a runtime alias
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Hyperparameters of the key-graph planner (ours, :mod:`~tactile_braille.agents.planner`).
+
+    Attributes:
+        gamma: discount of its value iteration (shorter paths are worth more).
+        learning_rate: Adam's step size for the key reader.
+        adam_eps: Adam's epsilon.
+        epsilon_start, epsilon_end: random actions at the start and the end of the schedule.
+        epsilon_decay_steps: environment steps over which epsilon decays linearly.
+        test_epsilon: random actions during test episodes (0: deterministic).
+        batch_size: labelled frames per update of the key reader.
+        hidden: units of the key reader's dense layer.
+        refit_every: the graph, the labels and the values are refitted from the replay after this
+            many new transitions.
+        graph_prior: pseudo-count spread evenly over the classes a move may lead to.
+        backtrack_readings: the backtracking also weighs the classes the graph leaves possible by
+            the key reader's reading of each frame, raised to this power (0: the graph alone).
+        nothing_memory: a frame that reads nothing is placed by the key and the move it came by
+            (:func:`~tactile_braille.agents.planner.state_classes`); False: all such frames are one
+            state.
+        backoff: pseudo-counts of a state off the keys' moves, spread as the moves of all such
+            states together (each is seen far more rarely than a key).
+        refit_passes: passes of each refit: the graph is counted with the labels so far, then the
+            labels are backtracked on it (1: the graph from the presses' labels and the reader).
+        sharpen: the backtracking reads the graph's probabilities raised to this power (and
+            renormalised): a key graph's moves are nearly deterministic.
+        accept: a frame before a press is labelled while the backtracked key has at least this
+            probability.
+        optimism: a move the graph has not seen from the believed key is worth ``gamma`` (so the
+            run tries it); False: it is worth what the graph's prior says.
+        repeat_penalty: an action already taken in the episode from the class the planner reads
+            loses this much of its value for each time (0: none): cells off the keys all read alike,
+            and a plan on what it reads can circle through them.
+        filter: the belief carries the last one through the graph and the previous action (a Bayes
+            filter over the episode); False: the key reader's probabilities alone.
+        planning_sweeps: sweeps of value iteration.
+    """
+
+    gamma: float = 0.9
+    learning_rate: float = 1e-3
+    adam_eps: float = 1e-8
+    epsilon_start: float = 1.0
+    epsilon_end: float = 0.1
+    epsilon_decay_steps: int = 1000
+    test_epsilon: float = 0.0
+    batch_size: int = 64
+    hidden: tuple[int, ...] = (128,)
+    refit_every: int = 50
+    graph_prior: float = 1e-3
+    nothing_memory: bool = True
+    backoff: float = 1.0
+    refit_passes: int = 1
+    backtrack_readings: float = 0.0
+    sharpen: float = 4.0
+    accept: float = 0.9
+    optimism: bool = True
+    repeat_penalty: float = 0.0
+    filter: bool = True
+    planning_sweeps: int = 60
+
+    def __post_init__(self) -> None:
+        _check_hyperparameters(self)
+        problems = []
+        if len(self.hidden) != 1:
+            problems.append(f"hidden is the key reader's one dense layer, got {self.hidden}")
+        if min(self.refit_every, self.refit_passes, self.planning_sweeps) < 1:
+            problems.append("refit_every, refit_passes and planning_sweeps must be at least 1")
+        if self.repeat_penalty < 0:
+            problems.append(f"repeat_penalty must not be negative, got {self.repeat_penalty}")
+        if self.backtrack_readings < 0:
+            problems.append(f"backtrack_readings is a power, at least 0, got {self.backtrack_readings}")
+        if self.backoff <= 0:
+            problems.append(f"backoff is a pseudo-count: positive, got {self.backoff}")
+        if self.graph_prior <= 0 or self.sharpen <= 0:
+            problems.append(
+                f"graph_prior and sharpen must be positive, got {self.graph_prior}, {self.sharpen}"
+            )
+        if not 0.5 < self.accept <= 1.0:
+            problems.append(f"accept is a probability in (0.5, 1], got {self.accept}")
+        if problems:
+            raise ValueError("PlannerConfig: " + "; ".join(problems))
+
+
+AgentConfig = Union[DQNConfig, DiscreteSACConfig, SACConfig, TD3Config, PlannerConfig]  # noqa: UP007 - a runtime alias
 AGENT_CONFIGS: dict[str, type] = {
     "dqn": DQNConfig,
     "sac_discrete": DiscreteSACConfig,
     "sac": SACConfig,
     "td3": TD3Config,
+    "planner": PlannerConfig,
 }
 """Each algorithm's hyperparameter dataclass."""
 ALGORITHMS: tuple[str, ...] = typing.get_args(Algorithm)
@@ -670,6 +755,11 @@ class TrainConfig:
 
     def _check_touch(self) -> None:
         touch = self.touch
+        if self.algo == "planner" and (touch.enabled or self.taps > 1 or self.replay.shift):
+            raise ValueError(
+                "the planner reads each single tactile image itself: turn touch.enabled off, and keep "
+                "taps=1 and replay.shift=0"
+            )
         needs_encoder = {
             "agent.critic_pose": getattr(self.agent, "critic_pose", False),
             "touch.inputs='readout'": touch.inputs != "features",

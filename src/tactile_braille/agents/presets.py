@@ -139,6 +139,10 @@ def paper_changes(task: str, algo: str) -> dict[str, Any]:
 def released_changes(task: str, algo: str) -> dict[str, Any]:
     """:data:`RELEASED_CHANGES` for ``algo``, and for the continuous agents the scale of actions inside
     their networks: the released code's read them in mm, ours in units of the task's largest move."""
+    if algo not in RELEASED_CHANGES:
+        raise ValueError(
+            f"the released code has no {algo}: --preset released is for {tuple(RELEASED_CHANGES)}"
+        )
     changes = RELEASED_CHANGES[algo]
     if algo in ("sac", "td3"):
         agent = {**changes["agent"], "action_input_scale": task_of(task).max_move_mm}
@@ -197,11 +201,25 @@ def fast_tactile_changes(task: str, algo: str) -> dict[str, Any]:
     from the run's presses); the learner sees its goal's offset (``touch.goal_positions`` with these
     labels), and neither it nor its critics see the arm's pose.
     """
+    if algo == "planner":
+        return planner_changes(task)
     changes = fast_changes(task, algo)
     changes["epochs"] = FAST_TACTILE_EPOCHS[family(task)]
     changes["touch"].update(labels="observation", pose_inputs=False)
     changes["agent"].pop("critic_pose", None)
     return changes
+
+
+def planner_changes(task: str) -> dict[str, Any]:
+    """``fast-tactile`` for the key-graph planner (:mod:`~tactile_braille.agents.planner`): its epochs,
+    no random start steps (its own epsilon starts at 1), one update of its key reader a step, and a
+    replay that stores each transition once (every transition relabelled as it is sampled)."""
+    return {
+        "epochs": FAST_TACTILE_EPOCHS[family(task)],
+        "start_steps": 0,
+        "updates_per_step": 1,
+        "replay": {"relabel": "all"},
+    }
 
 
 def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainConfig:
@@ -225,6 +243,8 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
     if name == "released":
         config = replace_settings(config, released_changes(task, algo))
     if name == "fast":
+        if algo == "planner":
+            raise ValueError("the planner reads the tactile images alone: use --preset fast-tactile or paper")
         config = replace_settings(config, fast_changes(task, algo))
     if name == "fast-tactile":
         config = replace_settings(config, fast_tactile_changes(task, algo))

@@ -150,6 +150,10 @@ class TouchAgent:
     def policy_action(self, observation: dict, *args, **kwargs):
         return self.agent.policy_action(self.features(observation), *args, **kwargs)
 
+    def sample(self, buffer, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """A batch of the replay's transitions (features, with the encoder's cache)."""
+        return buffer.sample(batch_size, rng)
+
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """An update of the wrapped agent; poses in the batch are standardised as the encoder's targets."""
         views = {name: self.view(batch[name], batch["goals"]) for name in ("images", "next_images")}

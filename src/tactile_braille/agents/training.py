@@ -25,6 +25,7 @@ from tactile_braille._io import exclusive_lock
 from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, TrainConfig
 from tactile_braille.agents.dqn import DQNAgent
 from tactile_braille.agents.extensions import RunExtension, make_extension
+from tactile_braille.agents.planner import PlannerAgent
 from tactile_braille.agents.replay import EpisodeReplayBuffer
 from tactile_braille.agents.rollout import evaluate
 from tactile_braille.agents.run import (
@@ -62,7 +63,8 @@ class Algorithm(NamedTuple):
 AGENTS = {
     name: Algorithm(agent, AGENT_CONFIGS[name], continuous=name in CONTINUOUS_ALGORITHMS)
     for name, agent in (
-        ("dqn", DQNAgent), ("sac_discrete", DiscreteSACAgent), ("sac", SACAgent), ("td3", TD3Agent)
+        ("dqn", DQNAgent), ("sac_discrete", DiscreteSACAgent), ("sac", SACAgent), ("td3", TD3Agent),
+        ("planner", PlannerAgent),
     )
 }  # fmt: skip
 """Implemented algorithms: agent class, hyperparameter dataclass, action kind."""
@@ -131,7 +133,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
                 if updates_due(config, counters.env_steps, buffer):
                     for _ in range(burst):
                         # Merged, so that a loss some updates skip (TD3's delayed actor) keeps its last value.
-                        losses.update(agent.update(buffer.sample(batch_size, rng)))
+                        losses.update(agent.update(agent.sample(buffer, batch_size, rng)))
                         counters.updates += 1
             agent.end_epoch()
             train_time = time.perf_counter() - started

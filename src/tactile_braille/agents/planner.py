@@ -1,0 +1,420 @@
+"""A key-graph planner: a model-based agent for the discrete tasks that learns from touch alone.
+
+Where DQN learns a value for every pair of frame and goal, the planner learns
+two small models from its run's own experience and plans on them:
+
+* **a key reader**, a small CNN that names the key under the sensor from a
+  frame (the task's keys and a last class, *nothing*: a cell off the keys).
+  Its labels are the achieved goals of presses (an observation: a press does
+  not move, so the frame it was chosen on shows the key it pressed; a press
+  that achieves nothing and goes on shows no key), and the frames before a
+  press, labelled by **backtracking**: from the pressed key, back through the
+  episode's moves on the key graph, as long as the graph names one class with
+  probability at least ``accept``.
+* **a key graph**, ``P(state' | state, move)``, counted over the replay's
+  moves from the reader's (or the labels') class probabilities of both
+  frames. Its states are the keys, and for a frame that reads *nothing*, the
+  key and the move it came by (:func:`state_classes`): every cell off the
+  keys reads alike, and without that memory a plan circles through them (from
+  X down to nothing, as if that nothing were the one under K, and back).
+
+It acts on a belief over states, the reader's probabilities filtered through
+the graph and the previous action (a discrete Bayes filter, which keeps the
+belief of the episode in progress), by QMDP: PRESS is worth the belief that
+the goal is under the sensor, a move the discounted value of where the graph
+says it leads (value iteration per goal, ``gamma``); a move the graph has not
+seen from the believed state is worth ``gamma`` (optimism, so that the run
+explores it). ``repeat_penalty`` takes value off an action already taken from
+the believed state in the episode. Exploring, it acts at random with the
+probability ``epsilon``.
+
+Everything it learns from is in the observation dictionary (frames, previous
+actions, achieved goals): the ``tactile`` track. It knows the actions'
+documented meaning (four moves and a press), not the layout.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from tactile_braille.agents.common import Agent, spaces_sizes
+from tactile_braille.agents.config import PlannerConfig
+from tactile_braille.envs.tasks import DISCRETE_ACTIONS
+from tactile_braille.supervised.fit import adam
+
+PRESS = DISCRETE_ACTIONS.index("PRESS")
+MOVES = PRESS
+"""The moves (UP, DOWN, LEFT, RIGHT) come before PRESS in the action order."""
+
+
+class KeyReader(nn.Module):
+    """A small CNN: the class logits (keys, then *nothing*) of 100x100 uint8 frames (B, 1, H, W)."""
+
+    def __init__(self, classes: int, hidden: int = 128) -> None:
+        super().__init__()
+        self.convolutions = nn.Sequential(
+            nn.AvgPool2d(2), nn.Conv2d(1, 16, 5, 2), nn.ReLU(), nn.Conv2d(16, 32, 3, 2), nn.ReLU(),
+            nn.Conv2d(32, 32, 3, 2), nn.ReLU(), nn.Flatten(),
+        )  # fmt: skip
+        size = self.convolutions(torch.zeros(1, 1, 100, 100)).shape[1]
+        self.head = nn.Sequential(nn.Linear(size, hidden), nn.ReLU(), nn.Linear(hidden, classes))
+
+    def forward(self, frames: torch.Tensor) -> torch.Tensor:
+        return self.head(self.convolutions(frames.float() / 255.0))
+
+
+class KeyGraph(nn.Module):
+    """The learnt moves between states (:func:`state_classes`): ``moves[s, m, t]`` = P(state t after
+    move m from state s), ``visits[s, m]`` the (soft) moves counted, and ``prior[c]`` each class's share
+    of the labels."""
+
+    def __init__(self, keys: int) -> None:
+        super().__init__()
+        states = keys + 1 + keys * MOVES
+        self.register_buffer("moves", torch.full((states, MOVES, states), 1.0 / states))
+        self.register_buffer("visits", torch.zeros(states, MOVES))
+        self.register_buffer("prior", torch.full((keys + 1,), 1.0 / (keys + 1)))
+
+
+def state_classes(keys: int) -> np.ndarray:
+    """The class each planning state reads: the ``keys`` key states, then *nothing* (an episode's
+    start or after nothing), then nothing reached from key k by move m (state ``keys + 1 + k * 4 + m``):
+    cells off the keys all read alike, and the key and the move before one tell them apart."""
+    return np.r_[np.arange(keys), np.full(1 + keys * MOVES, keys)]
+
+
+def place(reading: np.ndarray, before: np.ndarray | None, action: int, memory: bool = True) -> np.ndarray:
+    """A frame's state distribution from its class probabilities (keys, then nothing), the state
+    distribution of the frame before it (None: an episode's first) and the action between; without
+    ``memory`` every frame that reads nothing is in the one state *nothing*."""
+    keys = len(reading) - 1
+    state = np.zeros(keys + 1 + keys * MOVES)
+    state[:keys] = reading[:keys]
+    nothing = reading[keys]
+    if before is None or not memory:
+        state[keys] = nothing
+    elif action == PRESS:  # a press on nothing stays where it was
+        off_keys = before[keys:]
+        total = off_keys.sum()
+        if total > 0:
+            state[keys:] = nothing * off_keys / total
+        else:
+            state[keys] = nothing
+    else:
+        state[keys + 1 + np.arange(keys) * MOVES + action] = nothing * before[:keys]
+        state[keys] = nothing * before[keys:].sum()
+    return state
+
+
+class PlannerAgent(Agent):
+    """The key-graph planner.
+
+    Args:
+        observation_space: the task's Dict observation space (tactile images).
+        action_space: its ``Discrete(5)`` action space (four moves, then PRESS).
+        config: hyperparameters.
+        device: torch device of the reader.
+        precision: ``"fp32"`` or ``"bf16"`` (autocast in the reader's update).
+    """
+
+    policy_parts = ("reader", "graph")
+    checkpointed = ("reader", "graph", "optimiser")
+
+    def __init__(
+        self,
+        observation_space: gym.spaces.Dict,
+        action_space: gym.spaces.Discrete,
+        config: PlannerConfig | None = None,
+        device: str = "cpu",
+        precision: str = "fp32",
+    ) -> None:
+        super().__init__(device, precision)
+        if not isinstance(action_space, gym.spaces.Discrete) or int(action_space.n) != len(DISCRETE_ACTIONS):
+            raise ValueError(f"the planner needs the discrete tasks' Discrete(5) actions, got {action_space}")
+        if observation_space["observation"].shape != (100, 100, 1):
+            raise ValueError(
+                f"the planner reads single 100x100 tactile images, got {observation_space['observation']}"
+            )
+        self.config = config or PlannerConfig()
+        self.keys, _ = spaces_sizes(observation_space)
+        self.classes = self.keys + 1  # the keys, then nothing (a cell off the keys)
+        self.state_class = state_classes(self.keys)
+        self.reader = KeyReader(self.classes, self.config.hidden[0]).to(self.device)
+        self.graph = KeyGraph(self.keys).to(self.device)
+        self.optimiser = adam(self.reader.parameters(), self.config.learning_rate, self.config.adam_eps)
+        self.label_frames = np.zeros(0, dtype=np.int64)  # frame slots of the replay with a class
+        self.label_classes = np.zeros(0, dtype=np.int64)
+        self.fitted_size = -1  # the replay's size at the last refit (-1: none since made or restored)
+        self.refits = 0
+        self._beliefs: dict[bool, np.ndarray] = {}  # the belief of each stream's episode (train, test)
+        self._taken: dict[bool, np.ndarray] = {}  # the actions taken from each believed state in it
+        self._plan()
+
+    # ------------------------------------------------------------ acting
+    def epsilon(self, step: int) -> float:
+        """Exploration rate after ``step`` environment steps (linear decay)."""
+        config = self.config
+        fraction = min(step / max(config.epsilon_decay_steps, 1), 1.0)
+        return config.epsilon_start + fraction * (config.epsilon_end - config.epsilon_start)
+
+    @torch.no_grad()
+    def read(self, frames: np.ndarray, batch_size: int = 512) -> np.ndarray:
+        """Class probabilities (N, classes) of uint8 frames (N, 1, H, W) or (N, H, W, 1)."""
+        frames = np.asarray(frames)
+        if frames.ndim == 4 and frames.shape[-1] == 1 and frames.shape[1] != 1:
+            frames = np.moveaxis(frames, -1, 1)
+        self.reader.eval()
+        out = [
+            F.softmax(self.reader(torch.as_tensor(frames[i : i + batch_size], device=self.device)), -1)
+            for i in range(0, len(frames), batch_size)
+        ]
+        return torch.cat(out).float().cpu().numpy() if out else np.zeros((0, self.classes), np.float32)
+
+    def belief(self, observation: dict[str, np.ndarray], stream: bool = False) -> np.ndarray:
+        """The belief over states after ``observation``: the reader's probabilities placed after the
+        last belief of ``stream`` (:func:`place`), or, with ``filter``, that belief carried by the graph
+        through the previous action and weighed by the reading (a Bayes filter)."""
+        reading = self.read(observation["observation"][None])[0].astype(np.float64)
+        previous = np.asarray(observation["previous_action"])
+        last = self._beliefs.get(stream)
+        if not previous.any() or last is None:  # a new episode
+            self._taken[stream] = np.zeros((len(self.state_class), len(DISCRETE_ACTIONS)))
+            belief = place(reading, None, PRESS, self.config.nothing_memory)
+        elif self.config.filter:
+            action = int(previous.argmax())
+            carried = last if action == PRESS else last @ self._moves[:, action, :]
+            belief = (reading / self._prior)[self.state_class] * carried
+        else:
+            belief = place(reading, last, int(previous.argmax()), self.config.nothing_memory)
+        belief = belief / max(belief.sum(), 1e-300)
+        self._beliefs[stream] = belief
+        return belief
+
+    def action_values(self, belief: np.ndarray, goal: int) -> np.ndarray:
+        """QMDP values of the five actions under ``belief`` (over states) for the goal key ``goal``."""
+        gamma = self.config.gamma
+        moves = gamma * np.einsum("s,smt,t->m", belief, self._moves, self._values[goal])
+        if self.config.optimism:
+            seen = belief @ (self._visits >= 1.0)
+            moves = np.where(seen >= 0.5, moves, gamma)
+        return np.append(moves, belief[goal])
+
+    def policy_action(
+        self,
+        observation: dict,
+        step: int,
+        explore: bool,
+        rng: np.random.Generator,
+        deterministic: bool = False,
+    ) -> int:
+        """Epsilon-greedy on the QMDP values exploring, else with ``test_epsilon``; 0 if ``deterministic``."""
+        belief = self.belief(observation, stream=explore)
+        taken = self._taken[explore][int(belief.argmax())]
+        epsilon = 0.0 if deterministic else (self.epsilon(step) if explore else self.config.test_epsilon)
+        if rng.random() < epsilon:
+            action = int(rng.integers(len(DISCRETE_ACTIONS)))
+        else:
+            values = self.action_values(belief, int(np.argmax(observation["desired_goal"])))
+            action = int((values - self.config.repeat_penalty * taken).argmax())
+        taken[action] += 1
+        return action
+
+    # ------------------------------------------------------------ learning
+    def sample(self, buffer, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """A batch of labelled frames for the reader, the models refitted from ``buffer`` first when
+        ``refit_every`` transitions came since the last refit."""
+        if self.fitted_size < 0 or buffer.size - self.fitted_size >= self.config.refit_every:
+            self.refit(buffer)
+        if len(self.label_frames) == 0:
+            return {"frames": np.zeros((0, 1, 100, 100), np.uint8), "classes": np.zeros(0, np.int64)}
+        index = rng.integers(len(self.label_frames), size=min(batch_size, len(self.label_frames)))
+        return {
+            "frames": buffer.store.observations(self.label_frames[index]),
+            "classes": self.label_classes[index],
+        }
+
+    def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        """One gradient step of the reader's cross-entropy on labelled frames."""
+        if len(batch["classes"]) == 0:
+            return {}
+        t = self.tensors(batch)
+        self.reader.train()
+        with self.autocast():
+            loss = F.cross_entropy(self.reader(t["frames"]).float(), t["classes"])
+        self.optimiser.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimiser.step()
+        return {"losses/reader_loss": loss.item(), "charts/labelled_frames": float(len(self.label_frames))}
+
+    def refit(self, buffer) -> None:
+        """Refit the graph, the labels and the values from the replay's transitions."""
+        transitions = replay_order(buffer)
+        self.fitted_size, self.refits = buffer.size, self.refits + 1
+        if len(transitions) == 0:
+            return
+        this, after = buffer.frame_index[transitions, 0], buffer.frame_index[transitions, 1]
+        actions = buffer.actions[transitions].astype(np.int64)
+        achieved, dones = buffer.achieved[transitions].astype(np.int64), buffer.dones[transitions] > 0
+        frames, rows = np.unique(np.concatenate([this, after]), return_inverse=True)
+        row_this, row_after = rows[: len(this)], rows[len(this) :]
+        probabilities = self.read(buffer.store.observations(frames)).astype(np.float64)
+
+        pressed = actions == PRESS
+        anchors = np.full(len(frames), -1)
+        anchors[row_this[pressed & (achieved >= 0)]] = achieved[pressed & (achieved >= 0)]
+        anchors[row_this[pressed & (achieved < 0) & ~dones]] = self.keys  # a press on nothing goes on
+        known = anchors >= 0
+        evidence = (
+            probabilities / probabilities.mean(0).clip(1e-6) if self.config.backtrack_readings else None
+        )
+        remaining = buffer.remaining[transitions].astype(np.int64)
+        firsts = np.r_[True, remaining[:-1] == 0]  # each episode's first transition
+        ends = np.flatnonzero(dones & pressed & (achieved >= 0))
+        starts = episode_starts(remaining, ends)
+        labels = anchors
+        for _ in range(self.config.refit_passes):  # the graph from the labels, the labels from the graph
+            labelled = labels >= 0
+            probabilities[labelled] = np.eye(self.classes)[labels[labelled]]
+            states_this, states_after = placed_states(
+                probabilities, row_this, row_after, actions, firsts, self.config.nothing_memory
+            )
+            counts = np.zeros_like(self._moves)
+            for move in range(MOVES):
+                chosen = actions == move
+                counts[:, move, :] = states_this[chosen].T @ states_after[chosen]
+            moves = graph_moves(counts, self.keys, self.config.graph_prior, self.config.backoff)
+            labels = backtrack(moves, self.state_class, anchors, row_this, actions, achieved, starts, ends,
+                               self.config.sharpen, self.config.accept, evidence,
+                               self.config.backtrack_readings)  # fmt: skip
+        prior = np.bincount(anchors[known], minlength=self.classes) + 1.0
+        self.graph.moves.copy_(torch.as_tensor(moves))
+        visits = counts.sum(-1)
+        visits[self.keys :] = visits[self.keys :].sum(0)  # a state off the keys borrows the others' moves
+        self.graph.visits.copy_(torch.as_tensor(visits))
+        self.graph.prior.copy_(torch.as_tensor(prior / prior.sum()))
+        labelled = np.flatnonzero(labels >= 0)
+        self.label_frames, self.label_classes = frames[labelled], labels[labelled]
+        self._plan()
+
+    def _plan(self) -> None:
+        """Value iteration per goal on the graph: ``values[g, s]``, pressing worth 1 on the goal key."""
+        self._moves = self.graph.moves.double().cpu().numpy()
+        self._visits = self.graph.visits.double().cpu().numpy()
+        self._prior = self.graph.prior.double().cpu().numpy()
+        rewards = np.eye(self.keys, len(self.state_class))
+        values = rewards.copy()
+        for _ in range(self.config.planning_sweeps):
+            values = np.maximum(
+                rewards, self.config.gamma * np.einsum("smt,gt->gsm", self._moves, values).max(-1)
+            )
+        self._values = values
+
+    def load_state_dict(self, state: dict) -> None:
+        super().load_state_dict(state)
+        self.fitted_size = -1  # the labels are the replay's: read again at the next update
+        self._plan()
+
+    def load_policy_state_dict(self, state: dict) -> None:
+        super().load_policy_state_dict(state)
+        self._plan()
+
+
+def graph_moves(counts: np.ndarray, keys: int, prior: float, backoff: float) -> np.ndarray:
+    """``P(state' | state, move)`` from soft counts (states, moves, states): a key state's with
+    ``prior`` pseudo-counts spread evenly; a state off the keys' with ``backoff`` pseudo-counts spread as
+    the moves of all states off the keys together (it is seen more rarely than any key)."""
+    moves = counts + prior / counts.shape[-1]
+    pooled = counts[keys:].sum(0) + prior / counts.shape[-1]
+    pooled /= pooled.sum(-1, keepdims=True)
+    moves[keys:] = counts[keys:] + backoff * pooled
+    return moves / moves.sum(-1, keepdims=True)
+
+
+def placed_states(
+    probabilities: np.ndarray,
+    row_this: np.ndarray,
+    row_after: np.ndarray,
+    actions: np.ndarray,
+    firsts: np.ndarray,
+    memory: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The state distributions (:func:`place`) of each transition's two frames, in replay order
+    (``firsts`` marks each episode's first transition)."""
+    states_this = np.zeros((len(actions), len(place(probabilities[0], None, PRESS))))
+    states_after = np.zeros_like(states_this)
+    state = None
+    for step, action in enumerate(actions):
+        if firsts[step] or state is None:
+            state = place(probabilities[row_this[step]], None, PRESS, memory)
+        states_this[step] = state
+        state = place(probabilities[row_after[step]], state, int(action), memory)
+        states_after[step] = state
+    return states_this, states_after
+
+
+def backtrack(
+    moves: np.ndarray,
+    state_class: np.ndarray,
+    anchors: np.ndarray,
+    rows: np.ndarray,
+    actions: np.ndarray,
+    achieved: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    sharpen: float,
+    accept: float,
+    evidence: np.ndarray | None = None,
+    weight: float = 0.0,
+) -> np.ndarray:
+    """Each frame's class: its own press's (``anchors``, -1 for none), or one read back from the key
+    its episode pressed.
+
+    Args:
+        moves: the graph ``P(state' | state, move)``, (states, moves, states).
+        state_class: the class each state reads (:func:`state_classes`).
+        anchors: the class of each frame a press was chosen on, -1 elsewhere.
+        rows: each transition's first frame (an index into ``anchors``).
+        actions, achieved: each transition's action and pressed key (-1: none).
+        starts, ends: the first and the pressing last transition of each episode that pressed a key.
+        sharpen: the graph is read as ``moves ** sharpen``, renormalised.
+        accept: the labelling of an episode stops, going back, where no class has this probability.
+        evidence: the reader's probabilities over the classes' shares for each frame, weighing the
+            states the graph leaves possible by ``evidence ** weight`` (None: the graph alone).
+    """
+    labels = anchors.copy()
+    sharp = moves**sharpen
+    sharp /= sharp.sum(-1, keepdims=True)
+    states, classes = len(state_class), int(state_class.max()) + 1
+    collapse = np.eye(classes)[state_class]  # (states, classes)
+    for start, end in zip(starts, ends, strict=True):
+        belief = np.eye(states)[achieved[end]]  # the key state the press was chosen on
+        for step in range(end - 1, start - 1, -1):
+            if actions[step] != PRESS:  # a press on nothing stays where it was
+                belief = sharp[:, actions[step], :] @ belief
+            if evidence is not None:
+                belief = belief * evidence[rows[step]][state_class] ** weight
+            belief /= max(belief.sum(), 1e-300)
+            read = belief @ collapse
+            if read.max() < accept:
+                break
+            if labels[rows[step]] < 0:
+                labels[rows[step]] = int(read.argmax())
+    return labels
+
+
+def replay_order(buffer) -> np.ndarray:
+    """The replay's transition slots, oldest first (its ring buffer unrolled)."""
+    if buffer.size < buffer.capacity:
+        return np.arange(buffer.size)
+    return (np.arange(buffer.capacity) + buffer.next_slot) % buffer.capacity
+
+
+def episode_starts(remaining: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """The first transition of the episode of each transition in ``ends``, from the replay's
+    ``remaining`` (steps after each transition in its episode) over transitions in order."""
+    firsts = np.flatnonzero(np.r_[True, remaining[:-1] == 0])
+    return firsts[np.searchsorted(firsts, ends, side="right") - 1]

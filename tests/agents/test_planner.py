@@ -1,0 +1,221 @@
+"""The key-graph planner: its values, its belief, its backtracked labels, and runs on the tactile track."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from agents_helpers import DISCRETE_TASK, read_progress_csv, touch_config, train_module
+from tactile_braille.agents import PlannerConfig, TrainConfig, train
+from tactile_braille.agents.planner import (
+    MOVES,
+    PRESS,
+    PlannerAgent,
+    backtrack,
+    episode_starts,
+    place,
+    state_classes,
+)
+from tactile_braille.agents.presets import preset_config
+from tactile_braille.envs.tasks import DISCRETE_ACTIONS
+
+_STEPS = np.array([(-1, 0), (1, 0), (0, -1), (0, 1)])  # UP, DOWN, LEFT, RIGHT in (row, column)
+
+
+def true_graph(env) -> tuple[np.ndarray, np.ndarray]:
+    """The arrows' graph over the planner's states (:func:`state_classes`), and each cell's class:
+    read from the environment's grid, which only a test may know."""
+    core = env.unwrapped._core
+    keys = len(core.goal_keys)
+    classes = np.array([[core._goal_of_code[c] if c >= 0 else keys for c in row] for row in core.grid_codes])
+    rows, columns = classes.shape
+    cells = [(r, c) for r in range(rows) for c in range(columns)]
+
+    def step(cell, move):
+        r, c = cell[0] + _STEPS[move][0], cell[1] + _STEPS[move][1]
+        return (r, c) if 0 <= r < rows and 0 <= c < columns else cell
+
+    def state(cell, came_from, move):  # the state a cell reads, reached from another by a move
+        if classes[cell] < keys:
+            return classes[cell]
+        if came_from is not None and classes[came_from] < keys:
+            return keys + 1 + classes[came_from] * MOVES + move
+        return keys
+
+    states = keys + 1 + keys * MOVES
+    moves = np.zeros((states, MOVES, states))
+    for cell in cells:
+        arrivals = [(state(cell, None, 0), None)]  # an episode's start
+        arrivals += [(state(cell, there, m), there) for there in cells for m in range(MOVES)
+                     if step(there, m) == cell and there != cell]  # fmt: skip
+        for here, _ in arrivals:
+            for move in range(MOVES):
+                after = step(cell, move)
+                moves[here, move, state(after, cell, move)] += 1
+    moves += 1e-9
+    return moves / moves.sum(-1, keepdims=True), classes
+
+
+@pytest.fixture
+def planner(discrete_env):
+    torch.manual_seed(0)
+    return PlannerAgent(discrete_env.observation_space, discrete_env.action_space, PlannerConfig(gamma=0.9))
+
+
+def given_graph(agent: PlannerAgent, moves: np.ndarray, visits: float = 5.0) -> None:
+    agent.graph.moves.copy_(torch.as_tensor(moves))
+    agent.graph.visits.fill_(visits)
+    agent._plan()
+
+
+def test_the_values_are_the_discounted_shortest_paths_and_the_agent_walks_them(planner, discrete_env):
+    moves, _ = true_graph(discrete_env)
+    given_graph(planner, moves)
+    up, down, left, right = (
+        discrete_env.unwrapped.goal_keys.index(k) for k in ("UP", "DOWN", "LEFT", "RIGHT")
+    )
+    # From LEFT, RIGHT is two moves away (through DOWN), UP two (DOWN then UP), DOWN one.
+    assert planner._values[right, left] == pytest.approx(0.9**2, rel=1e-6)
+    assert planner._values[down, left] == pytest.approx(0.9, rel=1e-6)
+    assert planner._values[left, left] == 1.0
+    sure = np.eye(len(planner.state_class))
+    assert DISCRETE_ACTIONS[planner.action_values(sure[left], down).argmax()] == "RIGHT"
+    assert DISCRETE_ACTIONS[planner.action_values(sure[down], up).argmax()] == "UP"
+    assert DISCRETE_ACTIONS[planner.action_values(sure[up], up).argmax()] == "PRESS"
+    # Unsure where it is, it presses only what it believes enough.
+    unsure = 0.5 * sure[up] + 0.5 * sure[down]
+    assert planner.action_values(unsure, up)[PRESS] == pytest.approx(0.5)
+
+
+def test_a_move_the_graph_has_not_seen_is_worth_trying(planner, discrete_env):
+    moves, _ = true_graph(discrete_env)
+    given_graph(planner, moves, visits=0.0)
+    values = planner.action_values(np.eye(len(planner.state_class))[0], 1)
+    assert np.all(values[:MOVES] == planner.config.gamma)  # optimism: any move might lead to the goal
+
+
+def test_the_belief_carries_the_last_one_through_the_graph_and_the_previous_action(planner, discrete_env):
+    moves, _ = true_graph(discrete_env)
+    given_graph(planner, moves)
+    observation, _ = discrete_env.reset(seed=3)
+    first = planner.belief(observation, stream=True)
+    reading = planner.read(observation["observation"][None])[0]
+    np.testing.assert_allclose(first, place(reading, None, PRESS), rtol=1e-5)
+    assert first[: planner.keys].sum() == pytest.approx(1 - reading[-1], rel=1e-5)  # nothing: at the start
+    observation, *_ = discrete_env.step(DISCRETE_ACTIONS.index("RIGHT"))
+    reading = planner.read(observation["observation"][None])[0]
+    expected = (reading / planner._prior)[planner.state_class] * (first @ moves[:, 3, :])
+    np.testing.assert_allclose(planner.belief(observation, stream=True), expected / expected.sum(), rtol=1e-5)
+    # Another stream (the test episodes) keeps its own: a new episode there starts from the reading.
+    other = planner.belief({**observation, "previous_action": np.zeros(5, np.float32)}, stream=False)
+    np.testing.assert_allclose(other, place(reading, None, PRESS), rtol=1e-5)
+
+
+def test_a_cell_off_the_keys_is_told_apart_by_the_key_and_the_move_before_it():
+    keys = 4
+    key_up = np.eye(keys + 1)[0]
+    nothing = np.eye(keys + 1)[keys]
+    start = place(nothing, None, PRESS)
+    assert start.argmax() == keys  # nothing at an episode's start
+    after_up = place(nothing, place(key_up, None, PRESS), 2)  # LEFT from key 0
+    assert after_up.argmax() == keys + 1 + 0 * MOVES + 2
+    assert place(nothing, after_up, PRESS).argmax() == after_up.argmax()  # a press there stays
+    assert place(nothing, after_up, 3).argmax() == keys  # nothing after nothing
+    assert np.all(state_classes(keys)[keys:] == keys)
+
+
+def test_backtracking_labels_the_frames_before_a_press_with_the_keys_they_show(discrete_env):
+    """Scripted episodes on the real environment: each frame before a press is labelled, back
+    through the true graph, with the key the sensor was on (the grid's edge stops the backtracking
+    where a move may have stayed put: RIGHT into RIGHT comes from DOWN or from RIGHT itself)."""
+    moves, classes = true_graph(discrete_env)
+    core = discrete_env.unwrapped._core
+    frame_classes, rows, actions, achieved, remaining = [], [], [], [], []
+    for seed, script in ((0, "DUR"), (1, "LRP"), (2, "RRLP"), (3, "UP")):
+        discrete_env.reset(seed=seed)
+        episode = []
+        for name in [{"D": "DOWN", "U": "UP", "L": "LEFT", "R": "RIGHT", "P": "PRESS"}[c] for c in script]:
+            frame_classes.append(classes[tuple(core.cell[0])])
+            rows.append(len(frame_classes) - 1)
+            _, _, terminated, _, info = discrete_env.step(DISCRETE_ACTIONS.index(name))
+            episode.append(DISCRETE_ACTIONS.index(name))
+            pressed = discrete_env.unwrapped.goal_keys.index(info["pressed_key"]) if terminated else -1
+            achieved.append(pressed)
+            if terminated:
+                break
+        actions += episode
+        remaining += list(range(len(episode) - 1, -1, -1))
+    rows, actions, achieved = np.array(rows), np.array(actions), np.array(achieved)
+    anchors = np.full(len(frame_classes), -1)
+    pressed = achieved >= 0
+    anchors[rows[pressed]] = achieved[pressed]
+    ends = np.flatnonzero(pressed)
+    starts = episode_starts(np.array(remaining), ends)
+    labels = backtrack(moves, state_classes(4), anchors, rows, actions, achieved, starts, ends,
+                       sharpen=1.0, accept=0.99)  # fmt: skip
+    truth = np.array(frame_classes)
+    labelled = labels >= 0
+    assert labelled.sum() > pressed.sum()  # frames besides the presses' own were labelled
+    np.testing.assert_array_equal(labels[labelled], truth[labelled])
+    assert np.all(labels[~labelled] == -1)
+
+
+def test_a_refit_labels_each_press_frame_with_what_it_pressed(discrete_env, env_datasets):
+    config = TrainConfig(task=DISCRETE_TASK, algo="planner", dataset=str(env_datasets[DISCRETE_TASK]),
+                         replay={"relabel": "all", "capacity": 500})  # fmt: skip
+    env = train_module.make_env(config)
+    agent, buffer = train_module.make_agent(config, env), train_module.make_replay(config, env)
+    rng = np.random.default_rng(0)
+    observation, _ = env.reset(seed=0)
+    buffer.start_episode(observation)
+    for _ in range(120):
+        action = int(rng.integers(5))
+        observation, reward, terminated, truncated, _ = env.step(action)
+        buffer.add_step(action, reward, observation, terminated)
+        if terminated or truncated:
+            buffer.end_episode()
+            observation, _ = env.reset(seed=int(rng.integers(1000)))
+            buffer.start_episode(observation)
+    batch = agent.sample(buffer, 16, rng)
+    assert agent.refits == 1 and len(agent.label_frames) > 0
+    presses = np.flatnonzero((buffer.actions[: buffer.size] == PRESS) & (buffer.achieved[: buffer.size] >= 0))
+    frames = buffer.frame_index[presses, 0]
+    read = dict(zip(agent.label_frames, agent.label_classes, strict=True))
+    assert [read[f] for f in frames] == list(buffer.achieved[presses])
+    losses = agent.update(batch)
+    assert np.isfinite(losses["losses/reader_loss"])
+    np.testing.assert_allclose(agent.graph.moves.sum(-1).numpy(), 1.0, rtol=1e-6)
+
+
+def test_a_planner_run_learns_from_its_observations_alone_and_resumes(env_datasets, tmp_path, monkeypatch):
+    from test_tracks import _learnt
+
+    config = touch_config(env_datasets, "planner", track="tactile", touch={"enabled": False}, epochs=2,
+                          agent=PlannerConfig(batch_size=8, refit_every=5), start_steps=0)  # fmt: skip
+    plain = _learnt(config, tmp_path / "plain", monkeypatch, scrambled=False)
+    assert plain == _learnt(config, tmp_path / "scrambled", monkeypatch, scrambled=True)
+    assert any(row["losses/reader_loss"] not in ("", None) for row in plain)
+    train(dataclasses.replace(config, epochs=3), run_dir=tmp_path / "plain", resume=True, progress=False)
+    assert [row["epoch"] for row in read_progress_csv(tmp_path / "plain")] == ["0", "1", "2"]
+
+
+def test_the_planner_is_refused_what_it_cannot_read():
+    with pytest.raises(ValueError, match=r"turn touch\.enabled off"):
+        TrainConfig(task=DISCRETE_TASK, algo="planner", touch={"enabled": True}, track="proprio")
+    with pytest.raises(ValueError, match="needs a discrete task"):
+        TrainConfig(task="tactile_braille/ContinuousArrows-v0", algo="planner")
+    with pytest.raises(ValueError, match="the planner reads the tactile images alone"):
+        preset_config("fast", DISCRETE_TASK, "planner")
+    with pytest.raises(ValueError, match="the released code has no planner"):
+        preset_config("released", DISCRETE_TASK, "planner")
+    with pytest.raises(ValueError, match="accept is a probability"):
+        PlannerConfig(accept=0.4)
+    config = preset_config("fast-tactile", DISCRETE_TASK, "planner")
+    assert (config.track, config.replay.relabel, config.start_steps) == ("tactile", "all", 0)
+    env = gym.make("tactile_braille/ContinuousArrows-v0")
+    with pytest.raises(ValueError, match="Discrete\\(5\\) actions"):
+        PlannerAgent(env.observation_space, env.action_space)
