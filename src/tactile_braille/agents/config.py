@@ -408,13 +408,13 @@ class PlannerConfig:
     refit_every: int = 50
     graph_prior: float = 1e-3
     nothing_memory: bool = True
-    backoff: float = 1.0
+    backoff: float = 5.0
     refit_passes: int = 1
     backtrack_readings: float = 0.0
     sharpen: float = 4.0
     accept: float = 0.9
     optimism: bool = True
-    repeat_penalty: float = 0.0
+    repeat_penalty: float = 0.1
     filter: bool = True
     planning_sweeps: int = 60
 

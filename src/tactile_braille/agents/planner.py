@@ -25,7 +25,8 @@ the goal is under the sensor, a move the discounted value of where the graph
 says it leads (value iteration per goal, ``gamma``); a move the graph has not
 seen from the believed state is worth ``gamma`` (optimism, so that the run
 explores it). ``repeat_penalty`` takes value off an action already taken from
-the believed state in the episode. Exploring, it acts at random with the
+the believed state in the episode (not in the generic *nothing*, an episode's
+start off the keys, where repeating the best move is a straight line out). Exploring, it acts at random with the
 probability ``epsilon``.
 
 Everything it learns from is in the observation dictionary (frames, previous
@@ -213,14 +214,15 @@ class PlannerAgent(Agent):
     ) -> int:
         """Epsilon-greedy on the QMDP values exploring, else with ``test_epsilon``; 0 if ``deterministic``."""
         belief = self.belief(observation, stream=explore)
-        taken = self._taken[explore][int(belief.argmax())]
+        state = int(belief.argmax())
+        taken = self._taken[explore][state] * (state != self.keys)  # not in the generic nothing
         epsilon = 0.0 if deterministic else (self.epsilon(step) if explore else self.config.test_epsilon)
         if rng.random() < epsilon:
             action = int(rng.integers(len(DISCRETE_ACTIONS)))
         else:
             values = self.action_values(belief, int(np.argmax(observation["desired_goal"])))
             action = int((values - self.config.repeat_penalty * taken).argmax())
-        taken[action] += 1
+        self._taken[explore][state, action] += 1
         return action
 
     # ------------------------------------------------------------ learning

@@ -212,11 +212,13 @@ def fast_tactile_changes(task: str, algo: str) -> dict[str, Any]:
 
 def planner_changes(task: str) -> dict[str, Any]:
     """``fast-tactile`` for the key-graph planner (:mod:`~tactile_braille.agents.planner`): its epochs,
-    no random start steps (its own epsilon starts at 1), one update of its key reader a step, and a
-    replay that stores each transition once (every transition relabelled as it is sampled)."""
+    no random start steps (its own epsilon starts at 1), one update of its key reader a step, a replay
+    that stores each transition once (every transition relabelled as it is sampled), and a press on the
+    last step a training episode's time limit allows (every training episode then labels its frames)."""
     return {
         "epochs": FAST_TACTILE_EPOCHS[family(task)],
         "start_steps": 0,
+        "final_press": True,
         "updates_per_step": 1,
         "replay": {"relabel": "all"},
     }
