@@ -213,7 +213,7 @@ def test_the_planner_is_refused_what_it_cannot_read():
     with pytest.raises(ValueError, match="the released code has no planner"):
         preset_config("released", DISCRETE_TASK, "planner")
     with pytest.raises(ValueError, match="accept is a probability"):
-        PlannerConfig(accept=0.4)
+        PlannerConfig(accept=0.0)
     config = preset_config("fast-tactile", DISCRETE_TASK, "planner")
     assert (config.track, config.replay.relabel, config.start_steps) == ("tactile", "all", 0)
     env = gym.make("tactile_braille/ContinuousArrows-v0")

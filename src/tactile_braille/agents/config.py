@@ -369,7 +369,7 @@ class PlannerConfig:
         epsilon_decay_steps: environment steps over which epsilon decays linearly.
         test_epsilon: random actions during test episodes (0: deterministic).
         batch_size: labelled frames per update of the key reader.
-        hidden: units of the key reader's dense layer.
+        hidden: units of the key reader's dense layers.
         refit_every: the graph, the labels and the values are refitted from the replay after this
             many new transitions.
         graph_prior: pseudo-count spread evenly over the classes a move may lead to.
@@ -421,8 +421,6 @@ class PlannerConfig:
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
         problems = []
-        if len(self.hidden) != 1:
-            problems.append(f"hidden is the key reader's one dense layer, got {self.hidden}")
         if min(self.refit_every, self.refit_passes, self.planning_sweeps) < 1:
             problems.append("refit_every, refit_passes and planning_sweeps must be at least 1")
         if self.repeat_penalty < 0:
@@ -435,8 +433,8 @@ class PlannerConfig:
             problems.append(
                 f"graph_prior and sharpen must be positive, got {self.graph_prior}, {self.sharpen}"
             )
-        if not 0.5 < self.accept <= 1.0:
-            problems.append(f"accept is a probability in (0.5, 1], got {self.accept}")
+        if not 0.0 < self.accept <= 1.0:
+            problems.append(f"accept is a probability in (0, 1], got {self.accept}")
         if problems:
             raise ValueError("PlannerConfig: " + "; ".join(problems))
 

@@ -26,8 +26,8 @@ says it leads (value iteration per goal, ``gamma``); a move the graph has not
 seen from the believed state is worth ``gamma`` (optimism, so that the run
 explores it). ``repeat_penalty`` takes value off an action already taken from
 the believed state in the episode (not in the generic *nothing*, an episode's
-start off the keys, where repeating the best move is a straight line out). Exploring, it acts at random with the
-probability ``epsilon``.
+start off the keys, where repeating the best move is a straight line out).
+Exploring, it acts at random with the probability ``epsilon``.
 
 Everything it learns from is in the observation dictionary (frames, previous
 actions, achieved goals): the ``tactile`` track. It knows the actions'
@@ -35,6 +35,8 @@ documented meaning (four moves and a press), not the layout.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import gymnasium as gym
 import numpy as np
@@ -53,16 +55,20 @@ MOVES = PRESS
 
 
 class KeyReader(nn.Module):
-    """A small CNN: the class logits (keys, then *nothing*) of 100x100 uint8 frames (B, 1, H, W)."""
+    """A small CNN: the class logits (keys, then *nothing*) of 100x100 uint8 frames (B, 1, H, W); ``hidden``:
+    its dense layers' units."""
 
-    def __init__(self, classes: int, hidden: int = 128) -> None:
+    def __init__(self, classes: int, hidden: tuple[int, ...] = (128,)) -> None:
         super().__init__()
         self.convolutions = nn.Sequential(
             nn.AvgPool2d(2), nn.Conv2d(1, 16, 5, 2), nn.ReLU(), nn.Conv2d(16, 32, 3, 2), nn.ReLU(),
             nn.Conv2d(32, 32, 3, 2), nn.ReLU(), nn.Flatten(),
         )  # fmt: skip
-        size = self.convolutions(torch.zeros(1, 1, 100, 100)).shape[1]
-        self.head = nn.Sequential(nn.Linear(size, hidden), nn.ReLU(), nn.Linear(hidden, classes))
+        sizes = (self.convolutions(torch.zeros(1, 1, 100, 100)).shape[1], *hidden)
+        layers: list[nn.Module] = []
+        for size_in, size_out in itertools.pairwise(sizes):
+            layers += [nn.Linear(size_in, size_out), nn.ReLU()]
+        self.head = nn.Sequential(*layers, nn.Linear(sizes[-1], classes))
 
     def forward(self, frames: torch.Tensor) -> torch.Tensor:
         return self.head(self.convolutions(frames.float() / 255.0))
@@ -144,7 +150,7 @@ class PlannerAgent(Agent):
         self.keys, _ = spaces_sizes(observation_space)
         self.classes = self.keys + 1  # the keys, then nothing (a cell off the keys)
         self.state_class = state_classes(self.keys)
-        self.reader = KeyReader(self.classes, self.config.hidden[0]).to(self.device)
+        self.reader = KeyReader(self.classes, self.config.hidden).to(self.device)
         self.graph = KeyGraph(self.keys).to(self.device)
         self.optimiser = adam(self.reader.parameters(), self.config.learning_rate, self.config.adam_eps)
         self.label_frames = np.zeros(0, dtype=np.int64)  # frame slots of the replay with a class
