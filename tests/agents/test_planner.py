@@ -125,6 +125,8 @@ def test_a_cell_off_the_keys_is_told_apart_by_the_key_and_the_move_before_it():
     assert after_up.argmax() == keys + 1 + 0 * MOVES + 2
     assert place(nothing, after_up, PRESS).argmax() == after_up.argmax()  # a press there stays
     assert place(nothing, after_up, 3).argmax() == keys  # nothing after nothing
+    assert place(nothing, after_up, 3, carry=True).argmax() == after_up.argmax()  # or still off the keys
+    assert place(nothing, start, 3, carry=True).argmax() == keys  # by the start's way
     assert np.all(state_classes(keys)[keys:] == keys)
 
 

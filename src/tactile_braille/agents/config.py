@@ -378,6 +378,9 @@ class PlannerConfig:
         nothing_memory: a frame that reads nothing is placed by the key and the move it came by
             (:func:`~tactile_braille.agents.planner.state_classes`); False: all such frames are one
             state.
+        nothing_carry: a move from a frame that reads nothing to another keeps the key and the move
+            by which the sensor left the keys (the region off the keys it is in); False: such a
+            frame is in the state *nothing*, that of an episode's start.
         backoff: pseudo-counts of a state off the keys' moves, spread as the moves of all such
             states together (each is seen far more rarely than a key).
         refit_passes: passes of each refit: the graph is counted with the labels so far, then the
@@ -408,6 +411,7 @@ class PlannerConfig:
     refit_every: int = 50
     graph_prior: float = 1e-3
     nothing_memory: bool = True
+    nothing_carry: bool = False
     backoff: float = 5.0
     refit_passes: int = 1
     backtrack_readings: float = 0.0

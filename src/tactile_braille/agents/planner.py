@@ -94,10 +94,13 @@ def state_classes(keys: int) -> np.ndarray:
     return np.r_[np.arange(keys), np.full(1 + keys * MOVES, keys)]
 
 
-def place(reading: np.ndarray, before: np.ndarray | None, action: int, memory: bool = True) -> np.ndarray:
+def place(
+    reading: np.ndarray, before: np.ndarray | None, action: int, memory: bool = True, carry: bool = False
+) -> np.ndarray:
     """A frame's state distribution from its class probabilities (keys, then nothing), the state
     distribution of the frame before it (None: an episode's first) and the action between; without
-    ``memory`` every frame that reads nothing is in the one state *nothing*."""
+    ``memory`` every frame that reads nothing is in the one state *nothing*. With ``carry`` a move from
+    nothing to nothing keeps the key and the move by which the sensor left the keys (else: *nothing*)."""
     keys = len(reading) - 1
     state = np.zeros(keys + 1 + keys * MOVES)
     state[:keys] = reading[:keys]
@@ -113,7 +116,10 @@ def place(reading: np.ndarray, before: np.ndarray | None, action: int, memory: b
             state[keys] = nothing
     else:
         state[keys + 1 + np.arange(keys) * MOVES + action] = nothing * before[:keys]
-        state[keys] = nothing * before[keys:].sum()
+        if carry:
+            state[keys:] += nothing * before[keys:]
+        else:
+            state[keys] = nothing * before[keys:].sum()
     return state
 
 
@@ -196,7 +202,9 @@ class PlannerAgent(Agent):
             carried = last if action == PRESS else last @ self._moves[:, action, :]
             belief = (reading / self._prior)[self.state_class] * carried
         else:
-            belief = place(reading, last, int(previous.argmax()), self.config.nothing_memory)
+            belief = place(
+                reading, last, int(previous.argmax()), self.config.nothing_memory, self.config.nothing_carry
+            )
         belief = belief / max(belief.sum(), 1e-300)
         self._beliefs[stream] = belief
         return belief
@@ -288,7 +296,13 @@ class PlannerAgent(Agent):
             labelled = labels >= 0
             probabilities[labelled] = np.eye(self.classes)[labels[labelled]]
             states_this, states_after = placed_states(
-                probabilities, row_this, row_after, actions, firsts, self.config.nothing_memory
+                probabilities,
+                row_this,
+                row_after,
+                actions,
+                firsts,
+                self.config.nothing_memory,
+                self.config.nothing_carry,
             )
             counts = np.zeros_like(self._moves)
             for move in range(MOVES):
@@ -349,6 +363,7 @@ def placed_states(
     actions: np.ndarray,
     firsts: np.ndarray,
     memory: bool = True,
+    carry: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The state distributions (:func:`place`) of each transition's two frames, in replay order
     (``firsts`` marks each episode's first transition)."""
@@ -359,7 +374,7 @@ def placed_states(
         if firsts[step] or state is None:
             state = place(probabilities[row_this[step]], None, PRESS, memory)
         states_this[step] = state
-        state = place(probabilities[row_after[step]], state, int(action), memory)
+        state = place(probabilities[row_after[step]], state, int(action), memory, carry)
         states_after[step] = state
     return states_this, states_after
 
