@@ -373,16 +373,6 @@ class PlannerConfig:
         refit_every: the graph, the labels and the values are refitted from the replay after this
             many new transitions.
         graph_prior: pseudo-count spread evenly over the classes a move may lead to.
-        backtrack_readings: the backtracking also weighs the classes the graph leaves possible by
-            the key reader's reading of each frame, raised to this power (0: the graph alone).
-        nothing_memory: a frame that reads nothing is placed by the key and the move it came by
-            (:func:`~tactile_braille.agents.planner.state_classes`); False: all such frames are one
-            state.
-        nothing_carry: a move from a frame that reads nothing to another keeps the key and the move
-            by which the sensor left the keys (the region off the keys it is in); False: such a
-            frame is in the state *nothing*, that of an episode's start.
-        backoff: pseudo-counts of a state off the keys' moves, spread as the moves of all such
-            states together (each is seen far more rarely than a key).
         refit_passes: passes of each refit: the graph is counted with the labels so far, then the
             labels are backtracked on it (1: the graph from the presses' labels and the reader).
         sharpen: the backtracking reads the graph's probabilities raised to this power (and
@@ -414,7 +404,6 @@ class PlannerConfig:
     nothing_carry: bool = False
     backoff: float = 5.0
     refit_passes: int = 1
-    backtrack_readings: float = 0.0
     sharpen: float = 4.0
     accept: float = 0.9
     optimism: bool = True
@@ -429,10 +418,6 @@ class PlannerConfig:
             problems.append("refit_every, refit_passes and planning_sweeps must be at least 1")
         if self.repeat_penalty < 0:
             problems.append(f"repeat_penalty must not be negative, got {self.repeat_penalty}")
-        if self.backtrack_readings < 0:
-            problems.append(f"backtrack_readings is a power, at least 0, got {self.backtrack_readings}")
-        if self.backoff <= 0:
-            problems.append(f"backoff is a pseudo-count: positive, got {self.backoff}")
         if self.graph_prior <= 0 or self.sharpen <= 0:
             problems.append(
                 f"graph_prior and sharpen must be positive, got {self.graph_prior}, {self.sharpen}"

@@ -284,9 +284,6 @@ class PlannerAgent(Agent):
         anchors[row_this[pressed & (achieved >= 0)]] = achieved[pressed & (achieved >= 0)]
         anchors[row_this[pressed & (achieved < 0) & ~dones]] = self.keys  # a press on nothing goes on
         known = anchors >= 0
-        evidence = (
-            probabilities / probabilities.mean(0).clip(1e-6) if self.config.backtrack_readings else None
-        )
         remaining = buffer.remaining[transitions].astype(np.int64)
         firsts = np.r_[True, remaining[:-1] == 0]  # each episode's first transition
         ends = np.flatnonzero(dones & pressed & (achieved >= 0))
@@ -310,8 +307,7 @@ class PlannerAgent(Agent):
                 counts[:, move, :] = states_this[chosen].T @ states_after[chosen]
             moves = graph_moves(counts, self.keys, self.config.graph_prior, self.config.backoff)
             labels = backtrack(moves, self.state_class, anchors, row_this, actions, achieved, starts, ends,
-                               self.config.sharpen, self.config.accept, evidence,
-                               self.config.backtrack_readings)  # fmt: skip
+                               self.config.sharpen, self.config.accept)  # fmt: skip
         prior = np.bincount(anchors[known], minlength=self.classes) + 1.0
         self.graph.moves.copy_(torch.as_tensor(moves))
         visits = counts.sum(-1)
@@ -390,8 +386,6 @@ def backtrack(
     ends: np.ndarray,
     sharpen: float,
     accept: float,
-    evidence: np.ndarray | None = None,
-    weight: float = 0.0,
 ) -> np.ndarray:
     """Each frame's class: its own press's (``anchors``, -1 for none), or one read back from the key
     its episode pressed.
@@ -405,8 +399,6 @@ def backtrack(
         starts, ends: the first and the pressing last transition of each episode that pressed a key.
         sharpen: the graph is read as ``moves ** sharpen``, renormalised.
         accept: the labelling of an episode stops, going back, where no class has this probability.
-        evidence: the reader's probabilities over the classes' shares for each frame, weighing the
-            states the graph leaves possible by ``evidence ** weight`` (None: the graph alone).
     """
     labels = anchors.copy()
     sharp = moves**sharpen
@@ -418,8 +410,6 @@ def backtrack(
         for step in range(end - 1, start - 1, -1):
             if actions[step] != PRESS:  # a press on nothing stays where it was
                 belief = sharp[:, actions[step], :] @ belief
-            if evidence is not None:
-                belief = belief * evidence[rows[step]][state_class] ** weight
             belief /= max(belief.sum(), 1e-300)
             read = belief @ collapse
             if read.max() < accept:
