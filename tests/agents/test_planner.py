@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents_helpers import DISCRETE_TASK, read_progress_csv, touch_config, train_module
+from agents_helpers import CONTINUOUS_TASK, DISCRETE_TASK, read_progress_csv, touch_config, train_module
 from tactile_braille.agents import PlannerConfig, TrainConfig, train
 from tactile_braille.agents.planner import (
     MOVES,
@@ -205,11 +205,11 @@ def test_a_planner_run_learns_from_its_observations_alone_and_resumes(env_datase
     assert [row["epoch"] for row in read_progress_csv(tmp_path / "plain")] == ["0", "1", "2"]
 
 
-def test_the_planner_is_refused_what_it_cannot_read():
+def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
     with pytest.raises(ValueError, match=r"turn touch\.enabled off"):
         TrainConfig(task=DISCRETE_TASK, algo="planner", touch={"enabled": True}, track="proprio")
     with pytest.raises(ValueError, match="needs a discrete task"):
-        TrainConfig(task="tactile_braille/ContinuousArrows-v0", algo="planner")
+        TrainConfig(task=CONTINUOUS_TASK, algo="planner")
     with pytest.raises(ValueError, match="the planner reads the tactile images alone"):
         preset_config("fast", DISCRETE_TASK, "planner")
     with pytest.raises(ValueError, match="the released code has no planner"):
@@ -218,6 +218,6 @@ def test_the_planner_is_refused_what_it_cannot_read():
         PlannerConfig(accept=0.0)
     config = preset_config("fast-tactile", DISCRETE_TASK, "planner")
     assert (config.track, config.replay.relabel, config.start_steps) == ("tactile", "all", 0)
-    env = gym.make("tactile_braille/ContinuousArrows-v0")
+    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
     with pytest.raises(ValueError, match="Discrete\\(5\\) actions"):
         PlannerAgent(env.observation_space, env.action_space)
