@@ -221,3 +221,12 @@ def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
     env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
     with pytest.raises(ValueError, match="Discrete\\(5\\) actions"):
         PlannerAgent(env.observation_space, env.action_space)
+
+
+def test_a_record_of_a_retired_planner_setting_reads_only_with_the_value_the_code_still_runs():
+    stored = TrainConfig(task=DISCRETE_TASK, algo="planner").to_json()
+    stored["agent"] = {**stored["agent"], "backtrack_readings": 0.0}  # as the session-32 records hold it
+    assert TrainConfig.from_json(stored) == TrainConfig(task=DISCRETE_TASK, algo="planner")
+    stored["agent"]["backtrack_readings"] = 1.0
+    with pytest.raises(ValueError, match=r"agent\.backtrack_readings=1\.0: this setting was removed"):
+        TrainConfig.from_json(stored)

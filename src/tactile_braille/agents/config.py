@@ -805,7 +805,9 @@ class TrainConfig:
             raise ValueError("the settings name no algorithm ('algo')")
         _refuse_unknown(cls, data)
         if isinstance(data.get("agent"), dict):  # written before these settings: what it was trained with
-            data["agent"] = {**_LEGACY_AGENT.get(data["algo"], {}), **data["agent"]}
+            data["agent"] = _without_retired(
+                data["algo"], {**_LEGACY_AGENT.get(data["algo"], {}), **data["agent"]}
+            )
         if "track" not in data:  # written before tracks: the track its settings need
             config = cls(**{**data, "track": "proprio"})
             return replace_settings(config, {"track": "proprio" if proprio_settings(config) else "tactile"})
@@ -851,6 +853,23 @@ _LEGACY_AGENT = {
     algo: {"adam_eps": 1e-8, **({"loss": "huber"} if algo == "dqn" else {})} for algo in AGENT_CONFIGS
 }
 """What runs written before a setting existed were trained with, where that differs from its default."""
+
+
+_RETIRED_AGENT = {"planner": {"backtrack_readings": 0.0}}
+"""Settings since removed, with the one value the code still runs: records that give it read as
+without it (the planner's ``backtrack_readings``, removed unmeasured in session 32)."""
+
+
+def _without_retired(algo: str, agent: dict) -> dict:
+    """``agent`` without its retired settings; one given another value than the code still runs is
+    refused (its run cannot be read as what it did)."""
+    retired = _RETIRED_AGENT.get(algo, {})
+    for name, kept in retired.items():
+        if name in agent and agent[name] != kept:
+            raise ValueError(
+                f"agent.{name}={agent[name]!r}: this setting was removed; only runs with {kept!r} can be read"
+            )
+    return {name: value for name, value in agent.items() if name not in retired}
 
 
 def _ungroup_legacy(data: dict) -> dict:
