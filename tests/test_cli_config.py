@@ -14,7 +14,6 @@ from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, 
 from tactile_braille.cli import _train_config, build_parser, main
 from tactile_braille.cli_config import POSITIONAL, RECORD_ONLY
 
-AGENTS_CONTINUOUS = {algo: algo in CONTINUOUS_ALGORITHMS for algo in AGENT_CONFIGS}
 TASKS = {"dqn": "DiscreteArrows-v0", "sac_discrete": "DiscreteArrows-v0", "planner": "DiscreteArrows-v0",
          "sac": "ContinuousArrows-v0", "td3": "ContinuousArrows-v0"}  # fmt: skip
 
@@ -70,7 +69,7 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = "render", ["render"]
         if name == "frame_noise":
             value, words = (1.0, 2.0), ["1.0", "2.0"]
-        if name == "edges" and not AGENTS_CONTINUOUS[algo]:  # the continuous tasks' (test_config)
+        if name == "edges" and algo not in CONTINUOUS_ALGORITHMS:  # the continuous tasks' (test_config)
             value, words = "stop", ["stop"]
         if name == "key_grid" and algo in ("sac", "td3"):  # the discrete tasks' (test_config)
             value, words = "rig", ["rig"]
@@ -84,9 +83,7 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = 0, ["0"]
         if name == "agent.goal_difference":  # given as its default: it refuses goal heads (test_algorithms)
             value, words = 0, ["0"]
-        if (
-            name == "agent.return_bound"
-        ):  # given as its default: it refuses all-goals updates (test_algorithms)
+        if name == "agent.return_bound":  # given as its default: it refuses all-goals updates
             value, words = False, None
         if name == "agent.return_bound_after":  # given as its default: it needs return_bound
             value, words = 0, ["0"]

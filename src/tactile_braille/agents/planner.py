@@ -363,11 +363,11 @@ def placed_states(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The state distributions (:func:`place`) of each transition's two frames, in replay order
     (``firsts`` marks each episode's first transition)."""
-    states_this = np.zeros((len(actions), len(place(probabilities[0], None, PRESS))))
+    states_this = np.zeros((len(actions), len(state_classes(probabilities.shape[1] - 1))))
     states_after = np.zeros_like(states_this)
     state = None
     for step, action in enumerate(actions):
-        if firsts[step] or state is None:
+        if firsts[step]:  # the first transition is always one
             state = place(probabilities[row_this[step]], None, PRESS, memory)
         states_this[step] = state
         state = place(probabilities[row_after[step]], state, int(action), memory, carry)
