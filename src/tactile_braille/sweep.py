@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from tactile_braille._io import atomic_path
-from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, differences
+from tactile_braille.agents.config import AGENT_CONFIGS, acts_in, differences
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.run import MACHINE_SETTINGS, read_config, read_progress, setting_differences
 from tactile_braille.agents.training import train
@@ -110,7 +110,7 @@ def plan(
             if algo not in AGENT_CONFIGS:
                 raise ValueError(f"unknown algorithm {algo!r}; choose from {tuple(AGENT_CONFIGS)}")
             spec = task_of(Trial(task, algo, 0).env_id)
-            if spec is not None and spec.continuous != (algo in CONTINUOUS_ALGORITHMS):
+            if spec is not None and not acts_in(algo, spec.continuous):
                 continue
             changes = dict(overrides)
             for name, value in settings.get(algo, {}).items():  # a group's settings join the group's

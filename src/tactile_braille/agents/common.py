@@ -164,6 +164,12 @@ class Agent:
         batch holds n-step returns (a buffer with ``n_step`` > 1: its batches carry ``steps``)."""
         return self.config.gamma if "steps" not in t else self.config.gamma ** t["steps"]
 
+    def random_action(self, space: gym.Space, rng: np.random.Generator):
+        """A uniformly random action of the start steps (in [-1, 1] for continuous actions)."""
+        if isinstance(space, gym.spaces.Box):
+            return rng.uniform(-1.0, 1.0, size=space.shape).astype(np.float32)
+        return int(rng.integers(space.n))
+
     def sample(self, buffer, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         """What an update learns from: a batch of the replay's transitions (a model-based agent, the
         planner, reads its own from the replay)."""

@@ -387,6 +387,12 @@ class PlannerConfig:
         filter: the belief carries the last one through the graph and the previous action (a Bayes
             filter over the episode); False: the key reader's probabilities alone.
         planning_sweeps: sweeps of value iteration.
+        move: on the continuous tasks, the length of each of its four moves, a share of the task's
+            largest (1: 10 mm on the arrows, 20 mm on the alphabet).
+        sense_depth: on the continuous tasks, the normalised depth of the tap that ends each move
+            (depth ``5 + 3 * sense_depth`` mm, commanded); its presses tap at 1 (8 mm).
+        explore_press: the probability that a random action presses (None: uniform over the five).
+            Every press names the key under the sensor (its achieved goal), where a move names none.
     """
 
     gamma: float = 0.9
@@ -410,6 +416,9 @@ class PlannerConfig:
     repeat_penalty: float = 0.1
     filter: bool = True
     planning_sweeps: int = 60
+    move: float = 1.0
+    sense_depth: float = 0.0
+    explore_press: float | None = None
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
@@ -424,6 +433,12 @@ class PlannerConfig:
             )
         if not 0.0 < self.accept <= 1.0:
             problems.append(f"accept is a probability in (0, 1], got {self.accept}")
+        if not 0.0 < self.move <= 1.0:
+            problems.append(f"move is a share of the largest move, in (0, 1], got {self.move}")
+        if self.explore_press is not None and not 0.0 <= self.explore_press <= 1.0:
+            problems.append(f"explore_press is a probability in [0, 1], got {self.explore_press}")
+        if not -1.0 <= self.sense_depth < 1.0:
+            problems.append(f"sense_depth is a normalised depth in [-1, 1) (1 presses), got {self.sense_depth}")
         if problems:
             raise ValueError("PlannerConfig: " + "; ".join(problems))
 
@@ -440,6 +455,13 @@ AGENT_CONFIGS: dict[str, type] = {
 ALGORITHMS: tuple[str, ...] = typing.get_args(Algorithm)
 CONTINUOUS_ALGORITHMS = frozenset({"sac", "td3"})
 """Algorithms that act in continuous action spaces (the others choose among discrete actions)."""
+EITHER_KIND_ALGORITHMS = frozenset({"planner"})
+"""Algorithms that act in both: the planner takes five actions, as discrete or continuous ones."""
+
+
+def acts_in(algo: str, continuous: bool) -> bool:
+    """Whether ``algo`` acts in a continuous (True) or a discrete (False) task."""
+    return algo in EITHER_KIND_ALGORITHMS or (algo in CONTINUOUS_ALGORITHMS) == continuous
 
 
 @dataclass(frozen=True)
@@ -698,9 +720,14 @@ class TrainConfig:
         from tactile_braille.envs.registry import task_of  # the environments' registry, not torch
 
         task = task_of(self.task)  # raises for an unknown id
-        if task is not None and task.continuous != (self.algo in CONTINUOUS_ALGORITHMS):
+        if task is not None and not acts_in(self.algo, task.continuous):
             kind = "continuous" if self.algo in CONTINUOUS_ALGORITHMS else "discrete"
             raise ValueError(f"{self.algo} needs a {kind} task, got {self.task}")
+        if self.algo == "planner" and task is not None and task.continuous and self.final_press:
+            raise ValueError(
+                f"the planner learns from its own five actions: on {self.task} set final_press=False (it "
+                f"presses with the move asked, none of them)"
+            )
         if self.keep_pose_fraction > 0 and task is None:
             raise ValueError(
                 f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "

@@ -1,4 +1,4 @@
-"""A key-graph planner: a model-based agent for the discrete tasks that learns from touch alone.
+"""A key-graph planner: a model-based agent that learns from touch alone.
 
 Where DQN learns a value for every pair of frame and goal, the planner learns
 two small models from its run's own experience and plans on them:
@@ -32,6 +32,13 @@ Exploring, it acts at random with the probability ``epsilon``.
 Everything it learns from is in the observation dictionary (frames, previous
 actions, achieved goals): the ``tactile`` track. It knows the actions'
 documented meaning (four moves and a press), not the layout.
+
+On the continuous tasks it acts with the same five actions, as continuous
+ones (:func:`continuous_actions`): a move of ``move`` (a share of the task's
+largest) along x or y with a light tap at ``sense_depth``, and a press, a
+tap at the deepest depth without a move. Its graph's moves are then no longer
+one key each (the start is anywhere, and the keys' pitch is not the move's),
+which its soft counts and its belief filter carry as they are.
 """
 
 from __future__ import annotations
@@ -52,6 +59,19 @@ from tactile_braille.supervised.fit import adam
 PRESS = DISCRETE_ACTIONS.index("PRESS")
 MOVES = PRESS
 """The moves (UP, DOWN, LEFT, RIGHT) come before PRESS in the action order."""
+
+
+def continuous_actions(move: float, sense_depth: float) -> np.ndarray:
+    """The planner's five actions on a continuous task, (5, 3) float32 in the normalised ``(dx, dy,
+    depth)``: the four moves, ``move`` along the work frame's -x, +x, +y and -y (up, down, left and
+    right on the keyboard, as the discrete UP, DOWN, LEFT and RIGHT) with a tap at ``sense_depth``, then
+    PRESS, the deepest tap (depth 1) where the sensor is.
+    """
+    actions = np.zeros((len(DISCRETE_ACTIONS), 3), np.float32)
+    actions[:MOVES, :2] = [(-move, 0.0), (move, 0.0), (0.0, move), (0.0, -move)]
+    actions[:MOVES, 2] = sense_depth
+    actions[PRESS, 2] = 1.0
+    return actions
 
 
 class KeyReader(nn.Module):
@@ -128,7 +148,8 @@ class PlannerAgent(Agent):
 
     Args:
         observation_space: the task's Dict observation space (tactile images).
-        action_space: its ``Discrete(5)`` action space (four moves, then PRESS).
+        action_space: its ``Discrete(5)`` action space (four moves, then PRESS), or a continuous
+            task's ``Box(-1, 1, (3,))``, in which it takes :func:`continuous_actions`.
         config: hyperparameters.
         device: torch device of the reader.
         precision: ``"fp32"`` or ``"bf16"`` (autocast in the reader's update).
@@ -146,13 +167,19 @@ class PlannerAgent(Agent):
         precision: str = "fp32",
     ) -> None:
         super().__init__(device, precision)
-        if not isinstance(action_space, gym.spaces.Discrete) or int(action_space.n) != len(DISCRETE_ACTIONS):
-            raise ValueError(f"the planner needs the discrete tasks' Discrete(5) actions, got {action_space}")
+        discrete = isinstance(action_space, gym.spaces.Discrete) and int(action_space.n) == len(DISCRETE_ACTIONS)
+        continuous = isinstance(action_space, gym.spaces.Box) and action_space.shape == (3,)
+        if not (discrete or continuous):
+            raise ValueError(
+                f"the planner needs the discrete tasks' Discrete(5) actions or the continuous tasks' "
+                f"Box(-1, 1, (3,)), got {action_space}"
+            )
         if observation_space["observation"].shape != (100, 100, 1):
             raise ValueError(
                 f"the planner reads single 100x100 tactile images, got {observation_space['observation']}"
             )
         self.config = config or PlannerConfig()
+        self.continuous = None if discrete else continuous_actions(self.config.move, self.config.sense_depth)
         self.keys, _ = spaces_sizes(observation_space)
         self.classes = self.keys + 1  # the keys, then nothing (a cell off the keys)
         self.state_class = state_classes(self.keys)
@@ -198,12 +225,16 @@ class PlannerAgent(Agent):
             self._taken[stream] = np.zeros((len(self.state_class), len(DISCRETE_ACTIONS)))
             belief = place(reading, None, PRESS, self.config.nothing_memory)
         elif self.config.filter:
-            action = int(previous.argmax())
+            action = int(self.action_indices(previous[None])[0])
             carried = last if action == PRESS else last @ self._moves[:, action, :]
             belief = (reading / self._prior)[self.state_class] * carried
         else:
             belief = place(
-                reading, last, int(previous.argmax()), self.config.nothing_memory, self.config.nothing_carry
+                reading,
+                last,
+                int(self.action_indices(previous[None])[0]),
+                self.config.nothing_memory,
+                self.config.nothing_carry,
             )
         belief = belief / max(belief.sum(), 1e-300)
         self._beliefs[stream] = belief
@@ -225,19 +256,52 @@ class PlannerAgent(Agent):
         explore: bool,
         rng: np.random.Generator,
         deterministic: bool = False,
-    ) -> int:
-        """Epsilon-greedy on the QMDP values exploring, else with ``test_epsilon``; 0 if ``deterministic``."""
+    ) -> int | np.ndarray:
+        """Epsilon-greedy on the QMDP values exploring, else with ``test_epsilon``; 0 if ``deterministic``.
+        On a continuous task the chosen action as its :func:`continuous_actions` row."""
         belief = self.belief(observation, stream=explore)
         state = int(belief.argmax())
         taken = self._taken[explore][state] * (state != self.keys)  # not in the generic nothing
         epsilon = 0.0 if deterministic else (self.epsilon(step) if explore else self.config.test_epsilon)
         if rng.random() < epsilon:
-            action = int(rng.integers(len(DISCRETE_ACTIONS)))
+            action = self._random_index(rng)
         else:
             values = self.action_values(belief, int(np.argmax(observation["desired_goal"])))
             action = int((values - self.config.repeat_penalty * taken).argmax())
         self._taken[explore][state, action] += 1
-        return action
+        return action if self.continuous is None else self.continuous[action].copy()
+
+    def random_action(self, space: gym.Space, rng: np.random.Generator) -> int | np.ndarray:
+        """One of its five actions at random (the start steps'), as its exploration draws them."""
+        action = self._random_index(rng)
+        return action if self.continuous is None else self.continuous[action].copy()
+
+    def _random_index(self, rng: np.random.Generator) -> int:
+        """A random action index: uniform, or PRESS with the probability ``explore_press``."""
+        if self.config.explore_press is None:
+            return int(rng.integers(len(DISCRETE_ACTIONS)))
+        return PRESS if rng.random() < self.config.explore_press else int(rng.integers(MOVES))
+
+    def action_indices(self, actions: np.ndarray) -> np.ndarray:
+        """The planner's action index (moves, then PRESS) of each of ``actions``: discrete indices (N,),
+        one-hot previous actions (N, 5), or continuous ones (N, 3), which must be its own.
+
+        Raises:
+            ValueError: a continuous action that is none of :func:`continuous_actions` (random start
+                steps, a forced final press: the planner learns only from its own five actions).
+        """
+        actions = np.asarray(actions)
+        if self.continuous is None:
+            return actions.argmax(-1) if actions.ndim == 2 else actions.astype(np.int64)
+        distance = np.abs(actions[:, None, :] - self.continuous[None]).max(-1)
+        index = distance.argmin(-1)
+        strangers = distance[np.arange(len(actions)), index] > 1e-4
+        if strangers.any():
+            raise ValueError(
+                f"the planner acts with its own five continuous actions {self.continuous.tolist()}, got "
+                f"{actions[strangers][:3].tolist()}: run it without final_press"
+            )
+        return index
 
     # ------------------------------------------------------------ learning
     def sample(self, buffer, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -273,7 +337,7 @@ class PlannerAgent(Agent):
         if len(transitions) == 0:
             return
         this, after = buffer.frame_index[transitions, 0], buffer.frame_index[transitions, 1]
-        actions = buffer.actions[transitions].astype(np.int64)
+        actions = self.action_indices(buffer.actions[transitions])
         achieved, dones = buffer.achieved[transitions].astype(np.int64), buffer.dones[transitions] > 0
         frames, rows = np.unique(np.concatenate([this, after]), return_inverse=True)
         row_this, row_after = rows[: len(this)], rows[len(this) :]
@@ -282,7 +346,9 @@ class PlannerAgent(Agent):
         pressed = actions == PRESS
         anchors = np.full(len(frames), -1)
         anchors[row_this[pressed & (achieved >= 0)]] = achieved[pressed & (achieved >= 0)]
-        anchors[row_this[pressed & (achieved < 0) & ~dones]] = self.keys  # a press on nothing goes on
+        # A press of no goal key shows nothing: on the discrete tasks it goes on (a cell off the keys),
+        # on the continuous ones it may also end the episode (a key outside the task's).
+        anchors[row_this[pressed & (achieved < 0)]] = self.keys
         known = anchors >= 0
         remaining = buffer.remaining[transitions].astype(np.int64)
         firsts = np.r_[True, remaining[:-1] == 0]  # each episode's first transition

@@ -213,15 +213,33 @@ def fast_tactile_changes(task: str, algo: str) -> dict[str, Any]:
 def planner_changes(task: str) -> dict[str, Any]:
     """``fast-tactile`` for the key-graph planner (:mod:`~tactile_braille.agents.planner`): its epochs,
     no random start steps (its own epsilon starts at 1), one update of its key reader a step, a replay
-    that stores each transition once (every transition relabelled as it is sampled), and a press on the
-    last step a training episode's time limit allows (every training episode then labels its frames)."""
-    return {
+    that stores each transition once (every transition relabelled as it is sampled), and on the discrete
+    tasks a press on the last step a training episode's time limit allows (every training episode then
+    labels its frames).
+
+    On the continuous tasks (tuned on seed 100 of the arrows, session 33) its moves tap at a commanded
+    4 mm, the depth of an episode's first tap (every frame it reads is then alike); its random actions
+    press 8 times in 10, over 2,000 steps of decaying epsilon (each press names the key under the
+    sensor: on these tasks the start is anywhere, and the labels must cover the keys' every part); no
+    repeat penalty (a move of 10 or 20 mm may leave the sensor on the key it started on, and the same
+    move again is the way on); and no final press (there a press with the move asked would be none of
+    its five actions)."""
+    kind, _ = family(task)
+    changes: dict[str, Any] = {
         "epochs": FAST_TACTILE_EPOCHS[family(task)],
         "start_steps": 0,
-        "final_press": True,
+        "final_press": kind == "discrete",
         "updates_per_step": 1,
         "replay": {"relabel": "all"},
     }
+    if kind == "continuous":
+        changes["agent"] = {
+            "sense_depth": -1 / 3,
+            "explore_press": 0.8,
+            "epsilon_decay_steps": 2000,
+            "repeat_penalty": 0.0,
+        }
+    return changes
 
 
 def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainConfig:

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from tactile_braille._io import exclusive_lock
-from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, TrainConfig
+from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, TrainConfig, acts_in
 from tactile_braille.agents.dqn import DQNAgent
 from tactile_braille.agents.extensions import RunExtension, make_extension
 from tactile_braille.agents.planner import PlannerAgent
@@ -122,7 +122,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
             started = time.perf_counter()
             for _ in range(config.steps_per_epoch):
                 if counters.env_steps < config.start_steps:
-                    action = random_action(env.action_space, rng)
+                    action = agent.random_action(env.action_space, rng)
                 else:
                     action = agent.policy_action(
                         episodes.observation, counters.env_steps, explore=True, rng=rng
@@ -187,13 +187,6 @@ def updates_due(config: TrainConfig, env_steps: int, buffer: EpisodeReplayBuffer
     return (
         env_steps >= first and env_steps % config.update_every == 0 and buffer.size >= config.agent.batch_size
     )
-
-
-def random_action(space: gym.Space, rng: np.random.Generator):
-    """A uniformly random action of the start steps (in [-1, 1] for continuous actions)."""
-    if isinstance(space, gym.spaces.Box):
-        return rng.uniform(-1.0, 1.0, size=space.shape).astype(np.float32)
-    return int(rng.integers(space.n))
 
 
 class Episodes:
@@ -296,7 +289,7 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
 def make_agent(config: TrainConfig, env: gym.Env):
     """The run's agent for the task's spaces (a :class:`TouchAgent` with ``touch.enabled``)."""
     algorithm = AGENTS[config.algo]
-    if isinstance(env.action_space, gym.spaces.Box) != algorithm.continuous:
+    if not acts_in(config.algo, isinstance(env.action_space, gym.spaces.Box)):
         raise ValueError(f"{config.algo} cannot act in {config.task}'s action space {env.action_space}")
     if not config.touch.enabled:
         return algorithm.agent(
