@@ -16,8 +16,10 @@ from tactile_braille.agents.planner import (
     PRESS,
     PlannerAgent,
     backtrack,
+    continuous_actions,
     episode_starts,
     place,
+    place_entry,
     state_classes,
 )
 from tactile_braille.agents.presets import preset_config
@@ -208,8 +210,6 @@ def test_a_planner_run_learns_from_its_observations_alone_and_resumes(env_datase
 def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
     with pytest.raises(ValueError, match=r"turn touch\.enabled off"):
         TrainConfig(task=DISCRETE_TASK, algo="planner", touch={"enabled": True}, track="proprio")
-    with pytest.raises(ValueError, match="needs a discrete task"):
-        TrainConfig(task=CONTINUOUS_TASK, algo="planner")
     with pytest.raises(ValueError, match="the planner reads the tactile images alone"):
         preset_config("fast", DISCRETE_TASK, "planner")
     with pytest.raises(ValueError, match="the released code has no planner"):
@@ -218,9 +218,18 @@ def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
         PlannerConfig(accept=0.0)
     config = preset_config("fast-tactile", DISCRETE_TASK, "planner")
     assert (config.track, config.replay.relabel, config.start_steps) == ("tactile", "all", 0)
-    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
-    with pytest.raises(ValueError, match="Discrete\\(5\\) actions"):
-        PlannerAgent(env.observation_space, env.action_space)
+    with pytest.raises(ValueError, match="set final_press=False"):
+        TrainConfig(task=CONTINUOUS_TASK, algo="planner", final_press=True)
+    with pytest.raises(ValueError, match="move is a share"):
+        PlannerConfig(move=1.5)
+    with pytest.raises(ValueError, match="explore_press is a probability"):
+        PlannerConfig(explore_press=-0.1)
+    with pytest.raises(ValueError, match=r"Discrete\(5\) actions or the continuous tasks' Box"):
+        PlannerAgent(discrete_observation_space(), gym.spaces.Box(-1.0, 1.0, (2,)))
+
+
+def discrete_observation_space():
+    return gym.make(DISCRETE_TASK).observation_space
 
 
 def test_a_record_of_a_retired_planner_setting_reads_only_with_the_value_the_code_still_runs():
@@ -230,3 +239,66 @@ def test_a_record_of_a_retired_planner_setting_reads_only_with_the_value_the_cod
     stored["agent"]["backtrack_readings"] = 1.0
     with pytest.raises(ValueError, match=r"agent\.backtrack_readings=1\.0: this setting was removed"):
         TrainConfig.from_json(stored)
+
+
+def test_on_a_continuous_task_it_acts_with_its_five_actions_and_reads_them_back(env_datasets):
+    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
+    agent = PlannerAgent(env.observation_space, env.action_space, PlannerConfig(move=0.5, sense_depth=-0.2))
+    actions = continuous_actions(0.5, -0.2)
+    np.testing.assert_array_equal(actions[PRESS], [0.0, 0.0, 1.0])  # the deepest tap, no move
+    np.testing.assert_array_equal(np.abs(actions[:MOVES, :2]).sum(-1), 0.5)  # one axis each, both ways
+    assert len({tuple(a) for a in actions[:MOVES, :2]}) == MOVES and np.all(actions[:MOVES, 2] == -0.2)
+    np.testing.assert_array_equal(agent.action_indices(actions), np.arange(len(DISCRETE_ACTIONS)))
+    with pytest.raises(ValueError, match="run it without final_press"):
+        agent.action_indices(np.array([[0.5, 0.0, 1.0]], np.float32))  # a final press: a move, deep
+    rng = np.random.default_rng(0)
+    observation, _ = env.reset(seed=0)
+    for _ in range(6):
+        action = agent.policy_action(observation, 0, explore=True, rng=rng)
+        assert env.action_space.contains(action) and np.any(np.all(actions == action, axis=-1))
+        observation, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            observation, _ = env.reset(seed=1)
+    pressing = PlannerAgent(env.observation_space, env.action_space, PlannerConfig(explore_press=1.0))
+    assert all(pressing.random_action(env.action_space, rng)[2] == 1.0 for _ in range(5))
+
+
+def test_entry_states_keep_how_the_sensor_came_onto_each_class(discrete_env):
+    agent = PlannerAgent(
+        discrete_env.observation_space, discrete_env.action_space, PlannerConfig(entry_memory=True)
+    )
+    belief = np.random.default_rng(0).dirichlet(np.ones(len(agent.state_class)))
+    assert agent.action_values(belief, 2)[PRESS] == pytest.approx(belief[agent.state_class == 2].sum())
+    np.testing.assert_array_equal(agent._values[:, agent.state_class == 2][2], 1.0)  # pressing there pays
+    keys = 4
+    classes = state_classes(keys, entry=True)
+    assert len(classes) == (keys + 1) * (MOVES + 1) and np.all(np.bincount(classes) == MOVES + 1)
+    reading = np.array([0.0, 0.7, 0.0, 0.1, 0.2])
+    start, moved, pressed = place_entry(reading, None), place_entry(reading, 2), place_entry(reading, PRESS)
+    np.testing.assert_array_equal(start, pressed)
+    for state in (start, moved):  # each class keeps its probability, in one state of its five
+        np.testing.assert_allclose(np.bincount(classes, weights=state), reading)
+    assert np.flatnonzero(moved).tolist() == [1 * 5 + 3, 3 * 5 + 3, 4 * 5 + 3]  # reached by move 2
+    assert np.flatnonzero(start).tolist() == [1 * 5, 3 * 5, 4 * 5]
+
+
+def test_a_continuous_planner_run_learns_from_its_observations_alone(env_datasets, tmp_path, monkeypatch):
+    from test_tracks import _learnt
+
+    preset = preset_config("fast-tactile", CONTINUOUS_TASK, "planner")
+    assert (preset.track, preset.final_press, preset.agent.entry_memory, preset.edges) == (
+        "tactile",
+        False,
+        True,
+        "stop",
+    )
+    config = dataclasses.replace(
+        preset, dataset=str(env_datasets[CONTINUOUS_TASK]), epochs=2, steps_per_epoch=30, threads=1,
+        agent=dataclasses.replace(preset.agent, batch_size=8, refit_every=5),
+        evaluation=dataclasses.replace(preset.evaluation, test_episodes=2, snapshots=1),
+        replay=dataclasses.replace(preset.replay, capacity=200),
+    )  # fmt: skip
+    plain = _learnt(config, tmp_path / "plain", monkeypatch, scrambled=False)
+    assert plain == _learnt(config, tmp_path / "scrambled", monkeypatch, scrambled=True)
+    assert any(row["losses/reader_loss"] not in ("", None) for row in plain)
+    assert float(plain[-1]["charts/labelled_frames"]) > 0

@@ -391,6 +391,9 @@ class PlannerConfig:
             largest (1: 10 mm on the arrows, 20 mm on the alphabet).
         sense_depth: on the continuous tasks, the normalised depth of the tap that ends each move
             (depth ``5 + 3 * sense_depth`` mm, commanded); its presses tap at 1 (8 mm).
+        entry_memory: its states are each class as reached by each move or none (the key and how the
+            sensor came onto it), in place of ``nothing_memory``'s: on the continuous tasks a move need
+            not leave the key, and how the sensor came onto it says which part it is on.
         explore_press: the probability that a random action presses (None: uniform over the five).
             Every press names the key under the sensor (its achieved goal), where a move names none.
     """
@@ -418,6 +421,7 @@ class PlannerConfig:
     planning_sweeps: int = 60
     move: float = 1.0
     sense_depth: float = 0.0
+    entry_memory: bool = False
     explore_press: float | None = None
 
     def __post_init__(self) -> None:
@@ -438,7 +442,9 @@ class PlannerConfig:
         if self.explore_press is not None and not 0.0 <= self.explore_press <= 1.0:
             problems.append(f"explore_press is a probability in [0, 1], got {self.explore_press}")
         if not -1.0 <= self.sense_depth < 1.0:
-            problems.append(f"sense_depth is a normalised depth in [-1, 1) (1 presses), got {self.sense_depth}")
+            problems.append(
+                f"sense_depth is a normalised depth in [-1, 1) (1 presses), got {self.sense_depth}"
+            )
         if problems:
             raise ValueError("PlannerConfig: " + "; ".join(problems))
 

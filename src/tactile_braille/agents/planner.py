@@ -99,19 +99,36 @@ class KeyGraph(nn.Module):
     move m from state s), ``visits[s, m]`` the (soft) moves counted, and ``prior[c]`` each class's share
     of the labels."""
 
-    def __init__(self, keys: int) -> None:
+    def __init__(self, keys: int, entry: bool = False) -> None:
         super().__init__()
-        states = keys + 1 + keys * MOVES
+        states = len(state_classes(keys, entry))
         self.register_buffer("moves", torch.full((states, MOVES, states), 1.0 / states))
         self.register_buffer("visits", torch.zeros(states, MOVES))
         self.register_buffer("prior", torch.full((keys + 1,), 1.0 / (keys + 1)))
 
 
-def state_classes(keys: int) -> np.ndarray:
+def state_classes(keys: int, entry: bool = False) -> np.ndarray:
     """The class each planning state reads: the ``keys`` key states, then *nothing* (an episode's
     start or after nothing), then nothing reached from key k by move m (state ``keys + 1 + k * 4 + m``):
-    cells off the keys all read alike, and the key and the move before one tell them apart."""
+    cells off the keys all read alike, and the key and the move before one tell them apart.
+
+    With ``entry`` (:func:`place_entry`): each class (the keys, then nothing) five times over, as
+    reached by no move (an episode's start, a press) and by each of the four moves (state ``c * 5 + e``).
+    """
+    if entry:
+        return np.repeat(np.arange(keys + 1), MOVES + 1)
     return np.r_[np.arange(keys), np.full(1 + keys * MOVES, keys)]
+
+
+def place_entry(reading: np.ndarray, action: int | None) -> np.ndarray:
+    """A frame's distribution over the ``entry`` states (:func:`state_classes`) from its class
+    probabilities and the action that led to it (None: an episode's first frame): on the continuous
+    tasks a move need not leave the key, and how the sensor came onto a key says which part of it the
+    sensor is on."""
+    entry = 0 if action is None or action == PRESS else action + 1
+    state = np.zeros(len(reading) * (MOVES + 1))
+    state[entry :: MOVES + 1] = reading
+    return state
 
 
 def place(
@@ -167,7 +184,9 @@ class PlannerAgent(Agent):
         precision: str = "fp32",
     ) -> None:
         super().__init__(device, precision)
-        discrete = isinstance(action_space, gym.spaces.Discrete) and int(action_space.n) == len(DISCRETE_ACTIONS)
+        discrete = isinstance(action_space, gym.spaces.Discrete) and int(action_space.n) == len(
+            DISCRETE_ACTIONS
+        )
         continuous = isinstance(action_space, gym.spaces.Box) and action_space.shape == (3,)
         if not (discrete or continuous):
             raise ValueError(
@@ -182,9 +201,13 @@ class PlannerAgent(Agent):
         self.continuous = None if discrete else continuous_actions(self.config.move, self.config.sense_depth)
         self.keys, _ = spaces_sizes(observation_space)
         self.classes = self.keys + 1  # the keys, then nothing (a cell off the keys)
-        self.state_class = state_classes(self.keys)
+        entry = self.config.entry_memory
+        self.state_class = state_classes(self.keys, entry)
+        self.start_nothing = (
+            self.keys * (MOVES + 1) if entry else self.keys
+        )  # an episode's start off the keys
         self.reader = KeyReader(self.classes, self.config.hidden).to(self.device)
-        self.graph = KeyGraph(self.keys).to(self.device)
+        self.graph = KeyGraph(self.keys, entry).to(self.device)
         self.optimiser = adam(self.reader.parameters(), self.config.learning_rate, self.config.adam_eps)
         self.label_frames = np.zeros(0, dtype=np.int64)  # frame slots of the replay with a class
         self.label_classes = np.zeros(0, dtype=np.int64)
@@ -223,22 +246,25 @@ class PlannerAgent(Agent):
         last = self._beliefs.get(stream)
         if not previous.any() or last is None:  # a new episode
             self._taken[stream] = np.zeros((len(self.state_class), len(DISCRETE_ACTIONS)))
-            belief = place(reading, None, PRESS, self.config.nothing_memory)
+            belief = self._place(reading, None, None)
         elif self.config.filter:
             action = int(self.action_indices(previous[None])[0])
             carried = last if action == PRESS else last @ self._moves[:, action, :]
             belief = (reading / self._prior)[self.state_class] * carried
         else:
-            belief = place(
-                reading,
-                last,
-                int(self.action_indices(previous[None])[0]),
-                self.config.nothing_memory,
-                self.config.nothing_carry,
-            )
+            belief = self._place(reading, last, int(self.action_indices(previous[None])[0]))
         belief = belief / max(belief.sum(), 1e-300)
         self._beliefs[stream] = belief
         return belief
+
+    def _place(self, reading: np.ndarray, before: np.ndarray | None, action: int | None) -> np.ndarray:
+        """The state distribution of a frame (:func:`place`, or :func:`place_entry`)."""
+        if self.config.entry_memory:
+            return place_entry(reading, action)
+        config = self.config
+        return place(
+            reading, before, PRESS if action is None else action, config.nothing_memory, config.nothing_carry
+        )
 
     def action_values(self, belief: np.ndarray, goal: int) -> np.ndarray:
         """QMDP values of the five actions under ``belief`` (over states) for the goal key ``goal``."""
@@ -247,7 +273,7 @@ class PlannerAgent(Agent):
         if self.config.optimism:
             seen = belief @ (self._visits >= 1.0)
             moves = np.where(seen >= 0.5, moves, gamma)
-        return np.append(moves, belief[goal])
+        return np.append(moves, belief[self.state_class == goal].sum())
 
     def policy_action(
         self,
@@ -261,7 +287,7 @@ class PlannerAgent(Agent):
         On a continuous task the chosen action as its :func:`continuous_actions` row."""
         belief = self.belief(observation, stream=explore)
         state = int(belief.argmax())
-        taken = self._taken[explore][state] * (state != self.keys)  # not in the generic nothing
+        taken = self._taken[explore][state] * (state != self.start_nothing)  # not in the generic nothing
         epsilon = 0.0 if deterministic else (self.epsilon(step) if explore else self.config.test_epsilon)
         if rng.random() < epsilon:
             action = self._random_index(rng)
@@ -358,26 +384,20 @@ class PlannerAgent(Agent):
         for _ in range(self.config.refit_passes):  # the graph from the labels, the labels from the graph
             labelled = labels >= 0
             probabilities[labelled] = np.eye(self.classes)[labels[labelled]]
-            states_this, states_after = placed_states(
-                probabilities,
-                row_this,
-                row_after,
-                actions,
-                firsts,
-                self.config.nothing_memory,
-                self.config.nothing_carry,
-            )
+            states_this, states_after = placed_states(probabilities, row_this, row_after, actions, firsts,
+                                                      self._place)  # fmt: skip
             counts = np.zeros_like(self._moves)
             for move in range(MOVES):
                 chosen = actions == move
                 counts[:, move, :] = states_this[chosen].T @ states_after[chosen]
-            moves = graph_moves(counts, self.keys, self.config.graph_prior, self.config.backoff)
+            off_keys = len(self.state_class) if self.config.entry_memory else self.keys  # none pooled
+            moves = graph_moves(counts, off_keys, self.config.graph_prior, self.config.backoff)
             labels = backtrack(moves, self.state_class, anchors, row_this, actions, achieved, starts, ends,
                                self.config.sharpen, self.config.accept)  # fmt: skip
         prior = np.bincount(anchors[known], minlength=self.classes) + 1.0
         self.graph.moves.copy_(torch.as_tensor(moves))
         visits = counts.sum(-1)
-        visits[self.keys :] = visits[self.keys :].sum(0)  # a state off the keys borrows the others' moves
+        visits[off_keys:] = visits[off_keys:].sum(0)  # a state off the keys borrows the others' moves
         self.graph.visits.copy_(torch.as_tensor(visits))
         self.graph.prior.copy_(torch.as_tensor(prior / prior.sum()))
         labelled = np.flatnonzero(labels >= 0)
@@ -389,7 +409,7 @@ class PlannerAgent(Agent):
         self._moves = self.graph.moves.double().cpu().numpy()
         self._visits = self.graph.visits.double().cpu().numpy()
         self._prior = self.graph.prior.double().cpu().numpy()
-        rewards = np.eye(self.keys, len(self.state_class))
+        rewards = (np.arange(self.keys)[:, None] == self.state_class[None]).astype(np.float64)
         values = rewards.copy()
         for _ in range(self.config.planning_sweeps):
             values = np.maximum(
@@ -424,21 +444,23 @@ def placed_states(
     row_after: np.ndarray,
     actions: np.ndarray,
     firsts: np.ndarray,
-    memory: bool = True,
-    carry: bool = False,
+    placing=None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The state distributions (:func:`place`) of each transition's two frames, in replay order
-    (``firsts`` marks each episode's first transition)."""
-    states_this = np.zeros((len(actions), len(state_classes(probabilities.shape[1] - 1))))
-    states_after = np.zeros_like(states_this)
+    """The state distributions of each transition's two frames, in replay order (``firsts`` marks each
+    episode's first transition); ``placing(reading, before, action)`` places a frame (action None: an
+    episode's first), by default :func:`place` with its memory of the nothing reached from a key."""
+    placing = placing or (
+        lambda reading, before, action: place(reading, before, PRESS if action is None else action)
+    )
+    states_this, states_after = [], []
     state = None
     for step, action in enumerate(actions):
         if firsts[step]:  # the first transition is always one
-            state = place(probabilities[row_this[step]], None, PRESS, memory)
-        states_this[step] = state
-        state = place(probabilities[row_after[step]], state, int(action), memory, carry)
-        states_after[step] = state
-    return states_this, states_after
+            state = placing(probabilities[row_this[step]], None, None)
+        states_this.append(state)
+        state = placing(probabilities[row_after[step]], state, int(action))
+        states_after.append(state)
+    return np.array(states_this), np.array(states_after)
 
 
 def backtrack(
@@ -469,10 +491,10 @@ def backtrack(
     labels = anchors.copy()
     sharp = moves**sharpen
     sharp /= sharp.sum(-1, keepdims=True)
-    states, classes = len(state_class), int(state_class.max()) + 1
+    classes = int(state_class.max()) + 1
     collapse = np.eye(classes)[state_class]  # (states, classes)
     for start, end in zip(starts, ends, strict=True):
-        belief = np.eye(states)[achieved[end]]  # the key state the press was chosen on
+        belief = (state_class == achieved[end]) / np.sum(state_class == achieved[end])  # the key pressed
         for step in range(end - 1, start - 1, -1):
             if actions[step] != PRESS:  # a press on nothing stays where it was
                 belief = sharp[:, actions[step], :] @ belief

@@ -217,13 +217,13 @@ def planner_changes(task: str) -> dict[str, Any]:
     tasks a press on the last step a training episode's time limit allows (every training episode then
     labels its frames).
 
-    On the continuous tasks (tuned on seed 100 of the arrows, session 33) its moves tap at a commanded
-    4 mm, the depth of an episode's first tap (every frame it reads is then alike); its random actions
-    press 8 times in 10, over 2,000 steps of decaying epsilon (each press names the key under the
-    sensor: on these tasks the start is anywhere, and the labels must cover the keys' every part); no
-    repeat penalty (a move of 10 or 20 mm may leave the sensor on the key it started on, and the same
-    move again is the way on); and no final press (there a press with the move asked would be none of
-    its five actions)."""
+    On the continuous tasks (tuned on seeds 100-102 of the arrows, session 33) its moves tap at a
+    commanded 4 mm, the depth of an episode's first tap (every frame it reads is then alike); its random
+    actions press 8 times in 10, over 2,000 steps of decaying epsilon (each press names the key under the
+    sensor, and there the start is anywhere: the labels must cover every part of each key); and its
+    states are each key as reached by each move (``entry_memory``: a move of 10 or 20 mm may leave the
+    sensor on the key it was on, and how it came onto a key says which part it is on). No final press:
+    there a press with the move asked would be none of its five actions."""
     kind, _ = family(task)
     changes: dict[str, Any] = {
         "epochs": FAST_TACTILE_EPOCHS[family(task)],
@@ -237,7 +237,7 @@ def planner_changes(task: str) -> dict[str, Any]:
             "sense_depth": -1 / 3,
             "explore_press": 0.8,
             "epsilon_decay_steps": 2000,
-            "repeat_penalty": 0.0,
+            "entry_memory": True,
         }
     return changes
 
