@@ -222,6 +222,8 @@ def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
         TrainConfig(task=CONTINUOUS_TASK, algo="planner", final_press=True)
     with pytest.raises(ValueError, match="move is a share"):
         PlannerConfig(move=1.5)
+    with pytest.raises(ValueError, match="that entry_memory replaces"):
+        PlannerConfig(entry_memory=True, nothing_carry=True)
     with pytest.raises(ValueError, match="explore_press is a probability"):
         PlannerConfig(explore_press=-0.1)
     with pytest.raises(ValueError, match=r"Discrete\(5\) actions or the continuous tasks' Box"):

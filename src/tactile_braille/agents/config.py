@@ -439,6 +439,8 @@ class PlannerConfig:
             problems.append(f"accept is a probability in (0, 1], got {self.accept}")
         if not 0.0 < self.move <= 1.0:
             problems.append(f"move is a share of the largest move, in (0, 1], got {self.move}")
+        if self.entry_memory and self.nothing_carry:
+            problems.append("nothing_carry is a form of the states off the keys that entry_memory replaces")
         if self.explore_press is not None and not 0.0 <= self.explore_press <= 1.0:
             problems.append(f"explore_press is a probability in [0, 1], got {self.explore_press}")
         if not -1.0 <= self.sense_depth < 1.0:

@@ -203,9 +203,8 @@ class PlannerAgent(Agent):
         self.classes = self.keys + 1  # the keys, then nothing (a cell off the keys)
         entry = self.config.entry_memory
         self.state_class = state_classes(self.keys, entry)
-        self.start_nothing = (
-            self.keys * (MOVES + 1) if entry else self.keys
-        )  # an episode's start off the keys
+        # The state of an episode's start off the keys, where the repeat penalty does not apply.
+        self.start_nothing = self.keys * (MOVES + 1) if entry else self.keys
         self.reader = KeyReader(self.classes, self.config.hidden).to(self.device)
         self.graph = KeyGraph(self.keys, entry).to(self.device)
         self.optimiser = adam(self.reader.parameters(), self.config.learning_rate, self.config.adam_eps)
@@ -313,8 +312,8 @@ class PlannerAgent(Agent):
         one-hot previous actions (N, 5), or continuous ones (N, 3), which must be its own.
 
         Raises:
-            ValueError: a continuous action that is none of :func:`continuous_actions` (random start
-                steps, a forced final press: the planner learns only from its own five actions).
+            ValueError: a continuous action that is none of :func:`continuous_actions` (a forced final
+                press, a move with the deepest tap: the planner learns only from its own five actions).
         """
         actions = np.asarray(actions)
         if self.continuous is None:
