@@ -150,6 +150,10 @@ class TouchAgent:
     def policy_action(self, observation: dict, *args, **kwargs):
         return self.agent.policy_action(self.features(observation), *args, **kwargs)
 
+    def random_action(self, space, rng: np.random.Generator):
+        """The wrapped agent's random action of the start steps."""
+        return self.agent.random_action(space, rng)
+
     def sample(self, buffer, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         """A batch of the replay's transitions (features, with the encoder's cache)."""
         return buffer.sample(batch_size, rng)
