@@ -294,12 +294,15 @@ class PlannerAgent(Agent):
             values = self.action_values(belief, int(np.argmax(observation["desired_goal"])))
             action = int((values - self.config.repeat_penalty * taken).argmax())
         self._taken[explore][state, action] += 1
-        return action if self.continuous is None else self.continuous[action].copy()
+        return self._as_action(action)
 
     def random_action(self, space: gym.Space, rng: np.random.Generator) -> int | np.ndarray:
         """One of its five actions at random (the start steps'), as its exploration draws them."""
-        action = self._random_index(rng)
-        return action if self.continuous is None else self.continuous[action].copy()
+        return self._as_action(self._random_index(rng))
+
+    def _as_action(self, index: int) -> int | np.ndarray:
+        """The environment's action for an action index: itself, or its :func:`continuous_actions` row."""
+        return index if self.continuous is None else self.continuous[index].copy()
 
     def _random_index(self, rng: np.random.Generator) -> int:
         """A random action index: uniform, or PRESS with the probability ``explore_press``."""
@@ -443,14 +446,11 @@ def placed_states(
     row_after: np.ndarray,
     actions: np.ndarray,
     firsts: np.ndarray,
-    placing=None,
+    placing,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The state distributions of each transition's two frames, in replay order (``firsts`` marks each
     episode's first transition); ``placing(reading, before, action)`` places a frame (action None: an
-    episode's first), by default :func:`place` with its memory of the nothing reached from a key."""
-    placing = placing or (
-        lambda reading, before, action: place(reading, before, PRESS if action is None else action)
-    )
+    episode's first): the agent's (:func:`place` or :func:`place_entry`)."""
     states_this, states_after = [], []
     state = None
     for step, action in enumerate(actions):
