@@ -18,6 +18,7 @@ from tactile_braille.agents.planner import (
     backtrack,
     continuous_actions,
     episode_starts,
+    graph_moves_of,
     place,
     place_entry,
     state_classes,
@@ -168,22 +169,32 @@ def test_backtracking_labels_the_frames_before_a_press_with_the_keys_they_show(d
     assert np.all(labels[~labelled] == -1)
 
 
-def test_a_refit_labels_each_press_frame_with_what_it_pressed(discrete_env, env_datasets):
-    config = TrainConfig(task=DISCRETE_TASK, algo="planner", dataset=str(env_datasets[DISCRETE_TASK]),
-                         replay={"relabel": "all", "capacity": 500})  # fmt: skip
+def random_replay(config: TrainConfig, steps: int, rng: np.random.Generator):
+    """The run's environment, agent and replay, the replay filled with ``steps`` random steps (a
+    discrete task's five actions, or the agent's own continuous ones)."""
     env = train_module.make_env(config)
     agent, buffer = train_module.make_agent(config, env), train_module.make_replay(config, env)
-    rng = np.random.default_rng(0)
     observation, _ = env.reset(seed=0)
     buffer.start_episode(observation)
-    for _ in range(120):
-        action = int(rng.integers(5))
+    for _ in range(steps):
+        if agent.continuous is None:
+            action = int(rng.integers(len(DISCRETE_ACTIONS)))
+        else:
+            action = agent.continuous[rng.integers(len(agent.continuous))].copy()
         observation, reward, terminated, truncated, _ = env.step(action)
         buffer.add_step(action, reward, observation, terminated)
         if terminated or truncated:
             buffer.end_episode()
             observation, _ = env.reset(seed=int(rng.integers(1000)))
             buffer.start_episode(observation)
+    return env, agent, buffer
+
+
+def test_a_refit_labels_each_press_frame_with_what_it_pressed(discrete_env, env_datasets):
+    config = TrainConfig(task=DISCRETE_TASK, algo="planner", dataset=str(env_datasets[DISCRETE_TASK]),
+                         replay={"relabel": "all", "capacity": 500})  # fmt: skip
+    rng = np.random.default_rng(0)
+    _, agent, buffer = random_replay(config, 120, rng)
     batch = agent.sample(buffer, 16, rng)
     assert agent.refits == 1 and len(agent.label_frames) > 0
     presses = np.flatnonzero((buffer.actions[: buffer.size] == PRESS) & (buffer.achieved[: buffer.size] >= 0))
@@ -193,6 +204,25 @@ def test_a_refit_labels_each_press_frame_with_what_it_pressed(discrete_env, env_
     losses = agent.update(batch)
     assert np.isfinite(losses["losses/reader_loss"])
     np.testing.assert_allclose(agent.graph.moves.sum(-1).numpy(), 1.0, rtol=1e-6)
+
+
+def test_a_resumed_planner_refits_its_replay_as_before(env_datasets, tmp_path):
+    """Its refits read the replay's episodes (each transition's steps remaining): a checkpoint keeps
+    them, so a resumed run labels the frames it labelled before."""
+    config = TrainConfig(task=DISCRETE_TASK, algo="planner", dataset=str(env_datasets[DISCRETE_TASK]),
+                         replay={"relabel": "all", "capacity": 500})  # fmt: skip
+    env, agent, buffer = random_replay(config, 200, np.random.default_rng(1))
+    agent.refit(buffer)
+    before = agent.label_frames.copy(), agent.label_classes.copy(), agent.graph.moves.clone()
+    assert len(before[0]) > 0
+    buffer.save(tmp_path / "replay.npz")
+    restored = train_module.make_replay(config, env)
+    restored.load(tmp_path / "replay.npz")
+    np.testing.assert_array_equal(restored.remaining[: buffer.size], buffer.remaining[: buffer.size])
+    agent.refit(restored)
+    np.testing.assert_array_equal(agent.label_frames, before[0])
+    np.testing.assert_array_equal(agent.label_classes, before[1])
+    torch.testing.assert_close(agent.graph.moves, before[2])
 
 
 def test_a_planner_run_learns_from_its_observations_alone_and_resumes(env_datasets, tmp_path, monkeypatch):
@@ -263,6 +293,57 @@ def test_on_a_continuous_task_it_acts_with_its_five_actions_and_reads_them_back(
             observation, _ = env.reset(seed=1)
     pressing = PlannerAgent(env.observation_space, env.action_space, PlannerConfig(explore_press=1.0))
     assert all(pressing.random_action(env.action_space, rng)[2] == 1.0 for _ in range(5))
+
+
+def test_a_move_and_press_types_a_known_neighbour_in_one_step(env_datasets, discrete_env):
+    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
+    agent = PlannerAgent(env.observation_space, env.action_space, PlannerConfig(move=0.5, move_press=True))
+    actions = continuous_actions(0.5, 0.0, move_press=True)
+    assert actions.shape == (len(DISCRETE_ACTIONS) + MOVES, 3)
+    np.testing.assert_array_equal(actions[PRESS + 1 :, :2], actions[:MOVES, :2])  # the same moves, deep
+    assert np.all(actions[PRESS:, 2] == 1.0) and np.all(actions[:MOVES, 2] == 0.0)
+    np.testing.assert_array_equal(agent.action_indices(actions), np.arange(len(actions)))
+    np.testing.assert_array_equal(graph_moves_of(np.arange(len(actions))), [0, 1, 2, 3, PRESS, 0, 1, 2, 3])
+    # A graph where DOWN from key 0 surely reaches key 1: the move and press there is worth all of it,
+    # more than the move (a step later) and than pressing key 0.
+    states = len(agent.state_class)
+    moves = np.full((states, MOVES, states), 1.0 / states)
+    moves[0, 1] = np.eye(states)[1]
+    given_graph(agent, moves)
+    values = agent.action_values(np.eye(states)[0], 1)
+    assert values.argmax() == PRESS + 1 + 1 and values[PRESS + 1 + 1] == pytest.approx(1.0)
+    assert values[1] == pytest.approx(agent.config.gamma) and values[PRESS] == 0.0
+    assert agent._values[1, 0] == pytest.approx(1.0)  # one step from the goal is worth the goal
+    with pytest.raises(ValueError, match="move_press is for the continuous tasks"):
+        PlannerAgent(
+            discrete_env.observation_space, discrete_env.action_space, PlannerConfig(move_press=True)
+        )
+
+
+def test_a_move_and_press_labels_the_frame_it_reached_and_backtracks_through_its_move(env_datasets):
+    # Backtracking: an episode of one move and press (DOWN, onto key 1) from key 0.
+    classes = state_classes(2)
+    moves = np.full((len(classes), MOVES, len(classes)), 1e-6)
+    moves[:, :, 2] = 1.0  # everywhere else: nothing
+    moves[0, 1] = np.eye(len(classes))[1] + 1e-6
+    moves /= moves.sum(-1, keepdims=True)
+    anchors, rows, actions, achieved, starts, ends = ([-1, 1], [0], [1], [1], [0], [0])
+    arguments = (moves, classes, *map(np.array, (anchors, rows, actions, achieved, starts, ends)), 1.0, 0.9)
+    assert backtrack(*arguments, moved=np.array([True])).tolist() == [0, 1]  # read back through DOWN
+    assert backtrack(*arguments).tolist() == [-1, 1]  # a press that did not move: its frame is its own
+    # A refit on a continuous run's replay: each move and press that pressed a key labels the frame
+    # it reached with that key.
+    config = TrainConfig(task=CONTINUOUS_TASK, algo="planner", dataset=str(env_datasets[CONTINUOUS_TASK]),
+                         final_press=False, agent={"move_press": True, "entry_memory": True},
+                         replay={"relabel": "all", "capacity": 400})  # fmt: skip
+    rng = np.random.default_rng(0)
+    _, agent, buffer = random_replay(config, 300, rng)
+    agent.sample(buffer, 16, rng)
+    indices = agent.action_indices(buffer.actions[: buffer.size])
+    reached = np.flatnonzero((indices > PRESS) & (buffer.achieved[: buffer.size] >= 0))
+    assert len(reached) > 5
+    read = dict(zip(agent.label_frames, agent.label_classes, strict=True))
+    assert [read[f] for f in buffer.frame_index[reached, 1]] == list(buffer.achieved[reached])
 
 
 def test_entry_states_keep_how_the_sensor_came_onto_each_class(discrete_env):

@@ -396,6 +396,17 @@ class PlannerConfig:
             not leave the key, and how the sensor came onto it says which part it is on.
         explore_press: the probability that a random action presses (None: uniform over the five).
             Every press names the key under the sensor (its achieved goal), where a move names none.
+        move_press: on the continuous tasks, four more actions: each move with a press at its end (a
+            tap at the deepest depth) in place of the light tap, worth the belief that the move ends on
+            the goal key: a key the graph knows one move away is typed in one step, not two.
+        free_repeats: in the generic *nothing* (the state of an episode's start off the keys, and of
+            nothing after nothing) an action is taken this many times before ``repeat_penalty`` falls
+            on it; None: never (there repeating the best move is a straight line out, but a straight
+            line into the workspace's edge stays where it is, repeated until the time limit).
+        backtrack_evidence: going back from a press, the backtracking weighs in each frame's own
+            reading (the reader's probabilities over the class prior, raised to this power: a
+            backward Bayes filter); 0: the graph alone. On the continuous tasks a move's end is not
+            one key, and the graph alone stops the labelling a step or two before the press.
     """
 
     gamma: float = 0.9
@@ -423,14 +434,21 @@ class PlannerConfig:
     sense_depth: float = 0.0
     entry_memory: bool = False
     explore_press: float | None = None
+    move_press: bool = False
+    free_repeats: int | None = None
+    backtrack_evidence: float = 0.0
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
         problems = []
         if min(self.refit_every, self.refit_passes, self.planning_sweeps) < 1:
             problems.append("refit_every, refit_passes and planning_sweeps must be at least 1")
+        if self.free_repeats is not None and self.free_repeats < 0:
+            problems.append(f"free_repeats must not be negative, got {self.free_repeats}")
         if self.repeat_penalty < 0:
             problems.append(f"repeat_penalty must not be negative, got {self.repeat_penalty}")
+        if self.backtrack_evidence < 0:
+            problems.append(f"backtrack_evidence must not be negative, got {self.backtrack_evidence}")
         if self.graph_prior <= 0 or self.sharpen <= 0:
             problems.append(
                 f"graph_prior and sharpen must be positive, got {self.graph_prior}, {self.sharpen}"

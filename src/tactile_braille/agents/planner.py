@@ -25,8 +25,9 @@ the goal is under the sensor, a move the discounted value of where the graph
 says it leads (value iteration per goal, ``gamma``); a move the graph has not
 seen from the believed state is worth ``gamma`` (optimism, so that the run
 explores it). ``repeat_penalty`` takes value off an action already taken from
-the believed state in the episode (not in the generic *nothing*, an episode's
-start off the keys, where repeating the best move is a straight line out).
+the believed state in the episode (in the generic *nothing*, an episode's start
+off the keys, only after ``free_repeats``: there repeating the best move is a
+straight line out, until it meets the workspace's edge).
 Exploring, it acts at random with the probability ``epsilon``.
 
 Everything it learns from is in the observation dictionary (frames, previous
@@ -38,7 +39,11 @@ ones (:func:`continuous_actions`): a move of ``move`` (a share of the task's
 largest) along x or y with a light tap at ``sense_depth``, and a press, a
 tap at the deepest depth without a move. Its graph's moves are then no longer
 one key each (the start is anywhere, and the keys' pitch is not the move's),
-which its soft counts and its belief filter carry as they are.
+which its soft counts and its belief filter carry as they are. With
+``move_press`` it has four more actions there: each move with a press at its
+end, worth the belief that the move ends on the goal key (a known neighbour is
+typed in one step, not a move and a press); the graph counts them as their
+moves, and the key they press labels the frame they reach.
 """
 
 from __future__ import annotations
@@ -61,17 +66,33 @@ MOVES = PRESS
 """The moves (UP, DOWN, LEFT, RIGHT) come before PRESS in the action order."""
 
 
-def continuous_actions(move: float, sense_depth: float) -> np.ndarray:
-    """The planner's five actions on a continuous task, (5, 3) float32 in the normalised ``(dx, dy,
-    depth)``: the four moves, ``move`` along the work frame's -x, +x, +y and -y (up, down, left and
-    right on the keyboard, as the discrete UP, DOWN, LEFT and RIGHT) with a tap at ``sense_depth``, then
-    PRESS, the deepest tap (depth 1) where the sensor is.
+def continuous_actions(move: float, sense_depth: float, move_press: bool = False) -> np.ndarray:
+    """The planner's actions on a continuous task, (5, 3) float32 in the normalised ``(dx, dy, depth)``:
+    the four moves, ``move`` along the work frame's -x, +x, +y and -y (up, down, left and right on the
+    keyboard, as the discrete UP, DOWN, LEFT and RIGHT) with a tap at ``sense_depth``, then PRESS, the
+    deepest tap (depth 1) where the sensor is; with ``move_press`` (9, 3): then the four moves again,
+    each ending in a press (action ``PRESS + 1 + m`` is move ``m`` and a press).
     """
-    actions = np.zeros((len(DISCRETE_ACTIONS), 3), np.float32)
+    actions = np.zeros((len(DISCRETE_ACTIONS) + MOVES * move_press, 3), np.float32)
     actions[:MOVES, :2] = [(-move, 0.0), (move, 0.0), (0.0, move), (0.0, -move)]
     actions[:MOVES, 2] = sense_depth
     actions[PRESS, 2] = 1.0
+    if move_press:
+        actions[PRESS + 1 :, :2] = actions[:MOVES, :2]
+        actions[PRESS + 1 :, 2] = 1.0
     return actions
+
+
+def graph_moves_of(actions: np.ndarray) -> np.ndarray:
+    """The graph's move (0-3, or PRESS: none) each action index makes: a move and a press moves as the
+    move alone."""
+    actions = np.asarray(actions)
+    return np.where(actions > PRESS, actions - PRESS - 1, actions)
+
+
+def presses(actions: np.ndarray) -> np.ndarray:
+    """Which action indices press: PRESS, and each move and press."""
+    return np.asarray(actions) >= PRESS
 
 
 class KeyReader(nn.Module):
@@ -193,12 +214,18 @@ class PlannerAgent(Agent):
                 f"the planner needs the discrete tasks' Discrete(5) actions or the continuous tasks' "
                 f"Box(-1, 1, (3,)), got {action_space}"
             )
+        self.config = config or PlannerConfig()
+        if discrete and self.config.move_press:
+            raise ValueError("move_press is for the continuous tasks: a discrete task has five actions")
         if observation_space["observation"].shape != (100, 100, 1):
             raise ValueError(
                 f"the planner reads single 100x100 tactile images, got {observation_space['observation']}"
             )
-        self.config = config or PlannerConfig()
-        self.continuous = None if discrete else continuous_actions(self.config.move, self.config.sense_depth)
+        config = self.config
+        self.continuous = (
+            None if discrete else continuous_actions(config.move, config.sense_depth, config.move_press)
+        )
+        self.actions = len(DISCRETE_ACTIONS) + MOVES * config.move_press
         self.keys, _ = spaces_sizes(observation_space)
         self.classes = self.keys + 1  # the keys, then nothing (a cell off the keys)
         entry = self.config.entry_memory
@@ -244,10 +271,10 @@ class PlannerAgent(Agent):
         previous = np.asarray(observation["previous_action"])
         last = self._beliefs.get(stream)
         if not previous.any() or last is None:  # a new episode
-            self._taken[stream] = np.zeros((len(self.state_class), len(DISCRETE_ACTIONS)))
+            self._taken[stream] = np.zeros((len(self.state_class), self.actions))
             belief = self._place(reading, None, None)
         elif self.config.filter:
-            action = int(self.action_indices(previous[None])[0])
+            action = int(graph_moves_of(self.action_indices(previous[None]))[0])
             carried = last if action == PRESS else last @ self._moves[:, action, :]
             belief = (reading / self._prior)[self.state_class] * carried
         else:
@@ -257,7 +284,9 @@ class PlannerAgent(Agent):
         return belief
 
     def _place(self, reading: np.ndarray, before: np.ndarray | None, action: int | None) -> np.ndarray:
-        """The state distribution of a frame (:func:`place`, or :func:`place_entry`)."""
+        """The state distribution of a frame (:func:`place`, or :func:`place_entry`) after the action
+        index ``action`` (a move and a press placed as its move)."""
+        action = None if action is None else int(graph_moves_of(action))
         if self.config.entry_memory:
             return place_entry(reading, action)
         config = self.config
@@ -266,13 +295,18 @@ class PlannerAgent(Agent):
         )
 
     def action_values(self, belief: np.ndarray, goal: int) -> np.ndarray:
-        """QMDP values of the five actions under ``belief`` (over states) for the goal key ``goal``."""
+        """QMDP values of the actions under ``belief`` (over states) for the goal key ``goal``: the
+        moves', PRESS's (the belief on the goal), and each move and press's (the belief that the move
+        ends on the goal)."""
         gamma = self.config.gamma
         moves = gamma * np.einsum("s,smt,t->m", belief, self._moves, self._values[goal])
         if self.config.optimism:
             seen = belief @ (self._visits >= 1.0)
             moves = np.where(seen >= 0.5, moves, gamma)
-        return np.append(moves, belief[self.state_class == goal].sum())
+        values = np.append(moves, belief[self.state_class == goal].sum())
+        if self.config.move_press:
+            values = np.append(values, np.einsum("s,smt,t->m", belief, self._moves, self._rewards[goal]))
+        return values
 
     def policy_action(
         self,
@@ -286,7 +320,10 @@ class PlannerAgent(Agent):
         On a continuous task the chosen action as its :func:`continuous_actions` row."""
         belief = self.belief(observation, stream=explore)
         state = int(belief.argmax())
-        taken = self._taken[explore][state] * (state != self.start_nothing)  # not in the generic nothing
+        taken = self._taken[explore][state]
+        if state == self.start_nothing:  # the generic nothing: free repeats, or all (a straight line out)
+            free = self.config.free_repeats
+            taken = np.zeros_like(taken) if free is None else np.maximum(taken - free, 0.0)
         epsilon = 0.0 if deterministic else (self.epsilon(step) if explore else self.config.test_epsilon)
         if rng.random() < epsilon:
             action = self._random_index(rng)
@@ -311,12 +348,14 @@ class PlannerAgent(Agent):
         return PRESS if rng.random() < self.config.explore_press else int(rng.integers(MOVES))
 
     def action_indices(self, actions: np.ndarray) -> np.ndarray:
-        """The planner's action index (moves, then PRESS) of each of ``actions``: discrete indices (N,),
-        one-hot previous actions (N, 5), or continuous ones (N, 3), which must be its own.
+        """The planner's action index (moves, then PRESS, then the moves and presses) of each of
+        ``actions``: discrete indices (N,), one-hot previous actions (N, 5), or continuous ones (N, 3),
+        which must be its own.
 
         Raises:
             ValueError: a continuous action that is none of :func:`continuous_actions` (a forced final
-                press, a move with the deepest tap: the planner learns only from its own five actions).
+                press, a move with the deepest tap without ``move_press``: the planner learns only from
+                its own actions).
         """
         actions = np.asarray(actions)
         if self.continuous is None:
@@ -326,8 +365,9 @@ class PlannerAgent(Agent):
         strangers = distance[np.arange(len(actions)), index] > 1e-4
         if strangers.any():
             raise ValueError(
-                f"the planner acts with its own five continuous actions {self.continuous.tolist()}, got "
-                f"{actions[strangers][:3].tolist()}: run it without final_press"
+                f"the planner acts with its own {len(self.continuous)} continuous actions "
+                f"{self.continuous.tolist()}, got {actions[strangers][:3].tolist()}: run it without "
+                f"final_press"
             )
         return index
 
@@ -365,19 +405,27 @@ class PlannerAgent(Agent):
         if len(transitions) == 0:
             return
         this, after = buffer.frame_index[transitions, 0], buffer.frame_index[transitions, 1]
-        actions = self.action_indices(buffer.actions[transitions])
+        indices = self.action_indices(buffer.actions[transitions])
+        actions = graph_moves_of(indices)  # a move and a press counted as its move
         achieved, dones = buffer.achieved[transitions].astype(np.int64), buffer.dones[transitions] > 0
         frames, rows = np.unique(np.concatenate([this, after]), return_inverse=True)
         row_this, row_after = rows[: len(this)], rows[len(this) :]
         probabilities = self.read(buffer.store.observations(frames)).astype(np.float64)
+        readings = probabilities.copy()  # the reader's own, for the backtracking's evidence
 
-        pressed = actions == PRESS
+        pressed, moved = presses(indices), indices > PRESS
         anchors = np.full(len(frames), -1)
-        anchors[row_this[pressed & (achieved >= 0)]] = achieved[pressed & (achieved >= 0)]
-        # A press of no goal key shows nothing: on the discrete tasks it goes on (a cell off the keys),
-        # on the continuous ones it may also end the episode (a key outside the task's).
-        anchors[row_this[pressed & (achieved < 0)]] = self.keys
+        # A press labels the frame it was chosen on (it does not move), a move and a press the frame
+        # it reached. A press of no goal key shows nothing: on the discrete tasks it goes on (a cell off
+        # the keys), on the continuous ones it may also end the episode (a key outside the task's).
+        pressed_on = np.where(moved, row_after, row_this)
+        anchors[pressed_on[pressed]] = np.where(achieved[pressed] >= 0, achieved[pressed], self.keys)
         known = anchors >= 0
+        prior = np.bincount(anchors[known], minlength=self.classes) + 1.0
+        prior /= prior.sum()
+        evidence = None
+        if self.config.backtrack_evidence > 0:  # each frame's reading over the prior, floored
+            evidence = ((readings + 1e-3) / prior) ** self.config.backtrack_evidence
         remaining = buffer.remaining[transitions].astype(np.int64)
         firsts = np.r_[True, remaining[:-1] == 0]  # each episode's first transition
         ends = np.flatnonzero(dones & pressed & (achieved >= 0))
@@ -395,13 +443,12 @@ class PlannerAgent(Agent):
             off_keys = len(self.state_class) if self.config.entry_memory else self.keys  # none pooled
             moves = graph_moves(counts, off_keys, self.config.graph_prior, self.config.backoff)
             labels = backtrack(moves, self.state_class, anchors, row_this, actions, achieved, starts, ends,
-                               self.config.sharpen, self.config.accept)  # fmt: skip
-        prior = np.bincount(anchors[known], minlength=self.classes) + 1.0
+                               self.config.sharpen, self.config.accept, moved, evidence)  # fmt: skip
         self.graph.moves.copy_(torch.as_tensor(moves))
         visits = counts.sum(-1)
         visits[off_keys:] = visits[off_keys:].sum(0)  # a state off the keys borrows the others' moves
         self.graph.visits.copy_(torch.as_tensor(visits))
-        self.graph.prior.copy_(torch.as_tensor(prior / prior.sum()))
+        self.graph.prior.copy_(torch.as_tensor(prior))
         labelled = np.flatnonzero(labels >= 0)
         self.label_frames, self.label_classes = frames[labelled], labels[labelled]
         self._plan()
@@ -412,6 +459,9 @@ class PlannerAgent(Agent):
         self._visits = self.graph.visits.double().cpu().numpy()
         self._prior = self.graph.prior.double().cpu().numpy()
         rewards = (np.arange(self.keys)[:, None] == self.state_class[None]).astype(np.float64)
+        self._rewards = rewards
+        if self.config.move_press:  # a move and a press: the goal reached and pressed in this step
+            rewards = np.maximum(rewards, np.einsum("smt,gt->gsm", self._moves, rewards).max(-1))
         values = rewards.copy()
         for _ in range(self.config.planning_sweeps):
             values = np.maximum(
@@ -473,6 +523,8 @@ def backtrack(
     ends: np.ndarray,
     sharpen: float,
     accept: float,
+    moved: np.ndarray | None = None,
+    evidence: np.ndarray | None = None,
 ) -> np.ndarray:
     """Each frame's class: its own press's (``anchors``, -1 for none), or one read back from the key
     its episode pressed.
@@ -486,6 +538,11 @@ def backtrack(
         starts, ends: the first and the pressing last transition of each episode that pressed a key.
         sharpen: the graph is read as ``moves ** sharpen``, renormalised.
         accept: the labelling of an episode stops, going back, where no class has this probability.
+        moved: which transitions' presses also moved (a move and a press, whose ``actions`` is its
+            move): the pressed key is where it led, and its own first frame is read back too (None: no
+            press moved).
+        evidence: each frame's likelihood of each class (frames, classes), weighed into the belief
+            of the frame it reaches going back (a backward Bayes filter); None: the graph alone.
     """
     labels = anchors.copy()
     sharp = moves**sharpen
@@ -494,9 +551,12 @@ def backtrack(
     collapse = np.eye(classes)[state_class]  # (states, classes)
     for start, end in zip(starts, ends, strict=True):
         belief = (state_class == achieved[end]) / np.sum(state_class == achieved[end])  # the key pressed
-        for step in range(end - 1, start - 1, -1):
+        last = end if moved is not None and moved[end] else end - 1
+        for step in range(last, start - 1, -1):
             if actions[step] != PRESS:  # a press on nothing stays where it was
                 belief = sharp[:, actions[step], :] @ belief
+            if evidence is not None:
+                belief = belief * evidence[rows[step]][state_class]
             belief /= max(belief.sum(), 1e-300)
             read = belief @ collapse
             if read.max() < accept:

@@ -408,6 +408,9 @@ class EpisodeReplayBuffer:
             ``gamma ** k`` where the episode pressed that goal key ``k`` steps after it, else 0 (a
             lower bound of the optimal value where moves are deterministic; needs ``gamma``).
         return_bounds_after: the bounds are 0 until the buffer holds this many transitions.
+        episodes: its checkpoints keep each transition's ``remaining`` steps, as n-step and return-bound
+            buffers' do: an agent that reads the replay's episodes (the key-graph planner) needs them
+            after a resume.
     """
 
     def __init__(
@@ -430,6 +433,7 @@ class EpisodeReplayBuffer:
         press_frames: bool = False,
         return_bounds: bool = False,
         return_bounds_after: int = 0,
+        episodes: bool = False,
     ) -> None:
         if return_bounds and (gamma is None or not 0 <= gamma <= 1):
             raise ValueError(f"return bounds need the agent's discount gamma in [0, 1], got {gamma}")
@@ -459,6 +463,7 @@ class EpisodeReplayBuffer:
         self.capacity = int(capacity)
         self.poses, self.all_goals = bool(poses), bool(all_goals)
         self.press_frames, self.return_bounds = bool(press_frames), bool(return_bounds)
+        self.episodes = bool(episodes)
         self.return_bounds_after = int(return_bounds_after)
         self.n_step, self.gamma = int(n_step), gamma
         self.shift = int(shift)
@@ -732,9 +737,11 @@ class EpisodeReplayBuffer:
 
     @property
     def _saved(self) -> tuple[str, ...]:
-        """The transition arrays a checkpoint holds: ``remaining`` only where n-step returns or return
-        bounds read it, so that other buffers write the files they always wrote."""
-        return self._TRANSITIONS + (("remaining",) if self.n_step > 1 or self.return_bounds else ())
+        """The transition arrays a checkpoint holds: ``remaining`` only where n-step returns, return
+        bounds or the agent (``episodes``) read it, so that other buffers write the files they always
+        wrote."""
+        keeps = self.n_step > 1 or self.return_bounds or self.episodes
+        return self._TRANSITIONS + (("remaining",) if keeps else ())
 
     def save(self, path: str | Path) -> None:
         """Write the used part of the buffer (committed transitions) atomically as ``.npz``.

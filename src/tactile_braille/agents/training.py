@@ -336,4 +336,5 @@ def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
         press_frames=getattr(config.agent, "pressed_key", 0.0) > 0,
         return_bounds=getattr(config.agent, "return_bound", False),
         return_bounds_after=getattr(config.agent, "return_bound_after", 0),
+        episodes=config.algo == "planner",  # its refits read the replay's episodes
     )

@@ -1,0 +1,176 @@
+"""Where does a key-graph planner's typing go wrong, and where do its steps go?
+
+Types the paper's sequences (the paper's protocol, seed 0, as ``tactile-braille evaluate``) with the
+last checkpoint of planner runs and prints, run by run side by side: accuracy and steps, the steps a
+key took (typed right), how often each kind of action was taken (moves, presses and moves that end
+in a press), and how each miss happened: a press where the sensor stood, a move that ended in a press,
+or the time limit. With ``--reader`` it also reads the key under the sensor from random taps over the
+workspace at the planner's sensing depth, and scores the reader against the key the grid says is
+there (on the keys and off them). ``--show N`` prints N missed keys' actions a run, and at each
+step the class read and the state believed (``read>believed``). Both need what only a measurement
+may know (the grid's keys, the pose), never given to the agent: a diagnostic, not a result.
+
+    python benchmarks/planner_traces.py RUN_DIR [RUN_DIR ...] [--reader] [--show 5] [--set free_repeats=1]
+
+``--set NAME=VALUE`` types with a planner setting changed from the run's (one that acts at test time,
+such as ``gamma``, ``free_repeats`` or ``repeat_penalty``; the learnt reader and graph are the run's);
+with ``--refit`` the graph and the labels are refitted from the run's last replay first, so that a
+graph setting (``backoff``, ``graph_prior``) acts too (the reader is the run's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import tactile_braille  # noqa: F401 - registers the environments
+from tactile_braille.agents.planner import MOVES, PRESS, PlannerAgent
+from tactile_braille.agents.report import load_run
+from tactile_braille.agents.run import CHECKPOINT_FILE
+from tactile_braille.agents.training import make_replay
+from tactile_braille.envs.registry import task_of
+from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
+
+ACTION_NAMES = "UDLR"[:MOVES] + "P" + "udlr"[:MOVES]
+"""Each planner action's letter: the moves, PRESS, then each move that ends in a press (lower case)."""
+
+
+def state_name(agent: PlannerAgent, state: int, names: list[str]) -> str:
+    """A planning state's name: its class, then how it was reached: with ``entry_memory`` ``.`` (no
+    move) or the move's letter; else, off the keys, the key and the move it left by (``-`` alone: the
+    generic nothing)."""
+    if agent.config.entry_memory:
+        return names[agent.state_class[state]] + ".UDLR"[state % (MOVES + 1)]
+    if state <= agent.keys:
+        return names[agent.state_class[state]]
+    key, move = divmod(state - agent.keys - 1, MOVES)
+    return f"-{names[key]}{'UDLR'[move]}"
+
+
+class Recorder:
+    """The planner's test-time policy, with each action index it took, and what it read and believed
+    at each step (class read, believed state), episode by episode."""
+
+    def __init__(self, agent: PlannerAgent, names: list[str]) -> None:
+        self.agent, self.names, self.episodes, self.steps = agent, names, [], []
+
+    def policy_action(self, observation, step, explore, rng, deterministic=False):
+        if not np.asarray(observation["previous_action"]).any():
+            self.episodes.append([])
+            self.steps.append([])
+        action = self.agent.policy_action(observation, step, explore, rng, deterministic)
+        self.episodes[-1].append(int(self.agent.action_indices(np.asarray(action)[None])[0]))
+        read = self.agent.read(observation["observation"][None])[0].argmax()
+        believed = int(self.agent._beliefs[explore].argmax())
+        self.steps[-1].append(f"{self.names[read]}>{state_name(self.agent, believed, self.names)}")
+        return action
+
+
+def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> dict:
+    """Type the paper's sequences with the run's planner (its ``settings`` changed; with ``refit`` its
+    graph refitted from the run's last replay with them, the reader kept); what each key's episode did."""
+    config, env, agent = load_run(run_dir)
+    if not isinstance(agent, PlannerAgent):
+        raise SystemExit(f"{run_dir} is a {config.algo} run: this script reads planner runs")
+    agent.config = dataclasses.replace(agent.config, **(settings or {}))
+    agent._plan()  # the values again, for a planning setting (gamma, planning_sweeps)
+    if refit:
+        buffer = make_replay(config, env)
+        state = torch.load(Path(run_dir) / CHECKPOINT_FILE, weights_only=False, map_location="cpu")
+        buffer.load(Path(run_dir) / state["replay"])
+        agent.refit(buffer)
+    keys = task_of(config.task).keys
+    recorder = Recorder(agent, [*env.unwrapped.goal_keys, "-"])
+    result = type_sequences(recorder, env, paper_sequences(keys), seed=0, protocol="paper")
+    goals = [g for sequence in result.sequences for g in sequence]
+    typed = [t for sequence in result.typed for t in sequence]
+    steps = [s for sequence in result.steps for s in sequence]
+    if len(recorder.episodes) != len(goals):
+        raise RuntimeError(f"recorded {len(recorder.episodes)} episodes for {len(goals)} keys")
+    misses = Counter()
+    for goal, pressed, actions in zip(goals, typed, recorder.episodes, strict=True):
+        if pressed != goal:
+            last = actions[-1]
+            misses["time limit" if last < PRESS else ("press" if last == PRESS else "move and press")] += 1
+    return {
+        "run": run_dir, "task": config.task, "agent": agent, "env": env, "accuracy": result.accuracy,
+        "steps": result.total_steps, "keys": len(goals), "misses": misses,
+        "right_steps": Counter(s for s, g, t in zip(steps, goals, typed, strict=True) if g == t),
+        "actions": Counter(ACTION_NAMES[a] for episode in recorder.episodes for a in episode),
+        "episodes": list(zip(goals, typed, recorder.episodes, recorder.steps, strict=True)),
+    }  # fmt: skip
+
+
+def reader_accuracy(agent: PlannerAgent, env, taps: int = 2000, seed: int = 0) -> tuple[float, float, float]:
+    """The reader's accuracy on random taps at its sensing depth (all, on the keys, off them), against
+    the key a press there presses (the grid's label: a measurement's knowledge, not the agent's)."""
+    core = env.unwrapped._core
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(core._workspace_low, core._workspace_high, (taps, 2)) + core._frame_origin
+    sense = 5 + 3 * agent.config.sense_depth + core._depth_shift_mm
+    frames, _ = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, sense), rng)
+    _, pressed = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, 10.0), rng)
+    truth = core._goal_of_code[pressed]
+    truth = np.where(truth < 0, agent.keys, truth)
+    right = agent.read(frames.reshape(taps, 100, 100, 1)).argmax(-1) == truth
+    on_keys = truth < agent.keys
+    return float(right.mean()), float(right[on_keys].mean()), float(right[~on_keys].mean())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("runs", nargs="+", help="planner run folders (each with its checkpoint.pt)")
+    parser.add_argument("--reader", action="store_true", help="also score the reader on random taps")
+    parser.add_argument("--show", type=int, default=0, help="print this many missed keys' actions a run")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="type with this planner setting in place of the run's (Python literal)",
+    )
+    parser.add_argument(
+        "--refit",
+        action="store_true",
+        help="refit the graph and labels from the run's last replay with --set's settings",
+    )
+    args = parser.parse_args()
+    settings = {}
+    for setting in args.set:
+        name, _, value = setting.partition("=")
+        settings[name] = ast.literal_eval(value)
+    rows = [traces(run, settings, args.refit) for run in args.runs]
+    width = max(len(r["run"].rstrip("/").split("/")[-1]) for r in rows) + 2
+    print("run".ljust(width), "accuracy  steps  misses (press / move and press / time limit)  actions")
+    for row in rows:
+        misses = row["misses"]
+        actions = " ".join(f"{a}:{row['actions'][a]}" for a in ACTION_NAMES if row["actions"][a])
+        name = row["run"].rstrip("/").split("/")[-1]
+        print(name.ljust(width), f"{row['accuracy']:.3f}  {row['steps']:5d}  "
+              f"{misses['press']:3d} / {misses['move and press']:3d} / {misses['time limit']:3d}"
+              f"{'':29s}{actions}")  # fmt: skip
+    print("\nsteps a key typed right took: steps: keys")
+    for row in rows:
+        counts = row["right_steps"]
+        print(row["run"].rstrip("/").split("/")[-1].ljust(width),
+              "  ".join(f"{s}: {counts[s]}" for s in sorted(counts)))  # fmt: skip
+    if args.reader:
+        print("\nreader accuracy on 2,000 random taps (all, on the keys, off them)")
+        for row in rows:
+            every, on, off = reader_accuracy(row["agent"], row["env"])
+            print(row["run"].rstrip("/").split("/")[-1].ljust(width), f"{every:.3f}  {on:.3f}  {off:.3f}")
+    for row in rows:
+        missed = [episode for episode in row["episodes"] if episode[0] != episode[1]][: args.show]
+        for goal, typed, actions, steps in missed:
+            print(f"{row['run']}: {goal} typed as {typed}: {''.join(ACTION_NAMES[a] for a in actions)}")
+            print("    " + " ".join(f"{s} {ACTION_NAMES[a]}" for s, a in zip(steps, actions, strict=True)))
+
+
+if __name__ == "__main__":
+    main()
