@@ -56,6 +56,17 @@ VARIANTS = {
     "tactile-no-goal-offsets": ("fast-tactile", {"touch": {"goal_positions": False}}),
     "tactile-features": ("fast-tactile", {"touch": {"inputs": "features", "goal_positions": False}}),
     "tactile-paper-relabel": ("fast-tactile", {"replay": {"relabel": "paper"}}),
+    # The key-graph planner's parts (``--algo planner``), taken away one at a time: its belief filter,
+    # its optimism for moves the graph has not seen, its repeat penalty; on the discrete tasks the
+    # memory of the key a cell off the keys was left from and the final press of a training episode;
+    # on the continuous ones the entry states and the exploration that presses 8 times in 10.
+    "planner-no-filter": ("fast-tactile", {"agent": {"filter": False}}),
+    "planner-no-optimism": ("fast-tactile", {"agent": {"optimism": False}}),
+    "planner-no-repeat-penalty": ("fast-tactile", {"agent": {"repeat_penalty": 0.0}}),
+    "planner-no-nothing-memory": ("fast-tactile", {"agent": {"nothing_memory": False}}),
+    "planner-no-final-press": ("fast-tactile", {"final_press": False}),
+    "planner-no-entry-memory": ("fast-tactile", {"agent": {"entry_memory": False}}),
+    "planner-uniform-exploration": ("fast-tactile", {"agent": {"explore_press": None}}),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
                    VARIANTS.items())  # fmt: skip
@@ -72,6 +83,8 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=None, help="default: each variant's preset's")
     parser.add_argument("--root", type=Path, default=Path("runs/ablation"))
     parser.add_argument("--archive", type=Path, default=None, help="copy each run's record here")
+    parser.add_argument("--precision", choices=("bf16", "fp32"), default=None,
+                        help="default: the preset's")  # fmt: skip
     args = parser.parse_args()
     task = f"tactile_braille/{args.task}"
     print(f"{args.task}, {args.algo}, seeds {args.seeds}")
@@ -83,7 +96,9 @@ def main() -> None:
         paper_rule, absolute, minutes = [], [], []
         for seed in args.seeds:
             run = args.root / f"{args.task.split('-')[0]}__{args.algo}__{name}__{seed}"
-            config = preset_config(preset, task, args.algo, seed=seed, epochs=epochs, threads=1, **changes)
+            precision = {} if args.precision is None else {"precision": args.precision}
+            config = preset_config(preset, task, args.algo, seed=seed, epochs=epochs, threads=1, **precision,
+                                   **changes)  # fmt: skip
             if (run / "checkpoint.pt").exists():
                 differing = setting_differences(run, config)
                 if differing:
