@@ -85,8 +85,10 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
         state = torch.load(Path(run_dir) / CHECKPOINT_FILE, weights_only=False, map_location="cpu")
         with np.load(Path(run_dir) / state["replay"]) as replay:
             if "remaining" not in replay.files:
-                raise SystemExit(f"{run_dir}'s replay has no episode boundaries (written before they were "
-                                 "checkpointed, session 34): it cannot be refitted as the run would")  # fmt: skip
+                raise SystemExit(
+                    f"{run_dir}'s replay has no episode boundaries (written before session 34 checkpointed "
+                    "them): it cannot be refitted as the run would"
+                )
         buffer.load(Path(run_dir) / state["replay"])
         agent.refit(buffer)
     keys = task_of(config.task).keys
