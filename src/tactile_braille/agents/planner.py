@@ -411,7 +411,6 @@ class PlannerAgent(Agent):
         frames, rows = np.unique(np.concatenate([this, after]), return_inverse=True)
         row_this, row_after = rows[: len(this)], rows[len(this) :]
         probabilities = self.read(buffer.store.observations(frames)).astype(np.float64)
-        readings = probabilities.copy()  # the reader's own, for the backtracking's evidence
 
         pressed, moved = presses(indices), indices > PRESS
         anchors = np.full(len(frames), -1)
@@ -424,8 +423,8 @@ class PlannerAgent(Agent):
         prior = np.bincount(anchors[known], minlength=self.classes) + 1.0
         prior /= prior.sum()
         evidence = None
-        if self.config.backtrack_evidence > 0:  # each frame's reading over the prior, floored
-            evidence = ((readings + 1e-3) / prior) ** self.config.backtrack_evidence
+        if self.config.backtrack_evidence > 0:  # each frame's own reading over the prior, floored
+            evidence = ((probabilities + 1e-3) / prior) ** self.config.backtrack_evidence
         remaining = buffer.remaining[transitions].astype(np.int64)
         firsts = np.r_[True, remaining[:-1] == 0]  # each episode's first transition
         ends = np.flatnonzero(dones & pressed & (achieved >= 0))

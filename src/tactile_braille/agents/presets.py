@@ -230,9 +230,10 @@ def planner_changes(task: str) -> dict[str, Any]:
     states are each key as reached by each move (``entry_memory``: a move of 10 or 20 mm may leave the
     sensor on the key it was on, and how it came onto a key says which part it is on). No final press:
     there a press with the move asked would be none of its five actions. On the continuous alphabet its
-    moves are 18 mm (``move`` 0.9; tuned on its seed 100, session 34), shorter than the keys' 19 mm
-    pitch and the rows' 20 mm: a move of 20 mm from a key's far edge skips the key beside it, and the
-    planner then circles between the keys on either side, or presses the one it skipped to."""
+    moves are 18 mm (``move`` 0.9; tuned on its seed 100, session 34), shorter than nearly every key
+    along a row (18-21 mm, a 19 mm pitch): a move of 20 mm from a key's far edge skips the key beside
+    it, and the planner then circles between the keys on either side, or presses the one it skipped
+    to."""
     kind, keys = family(task)
     changes: dict[str, Any] = {
         "epochs": PLANNER_EPOCHS.get(family(task), FAST_TACTILE_EPOCHS[family(task)]),
