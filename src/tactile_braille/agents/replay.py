@@ -463,8 +463,7 @@ class EpisodeReplayBuffer:
         self.capacity = int(capacity)
         self.poses, self.all_goals = bool(poses), bool(all_goals)
         self.press_frames, self.return_bounds = bool(press_frames), bool(return_bounds)
-        self.episodes = bool(episodes)
-        self.return_bounds_after = int(return_bounds_after)
+        self.episodes, self.return_bounds_after = bool(episodes), int(return_bounds_after)
         self.n_step, self.gamma = int(n_step), gamma
         self.shift = int(shift)
         self.her = her
