@@ -105,8 +105,8 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
             last = actions[-1]
             misses["time limit" if last < PRESS else ("press" if last == PRESS else "move and press")] += 1
     return {
-        "run": run_dir, "task": config.task, "agent": agent, "env": env, "accuracy": result.accuracy,
-        "steps": result.total_steps, "keys": len(goals), "misses": misses,
+        "run": run_dir, "name": Path(run_dir).name, "agent": agent, "env": env, "accuracy": result.accuracy,
+        "steps": result.total_steps, "misses": misses,
         "right_steps": Counter(s for s, g, t in zip(steps, goals, typed, strict=True) if g == t),
         "actions": Counter(ACTION_NAMES[a] for episode in recorder.episodes for a in episode),
         "episodes": list(zip(goals, typed, recorder.episodes, recorder.steps, strict=True)),
@@ -116,6 +116,8 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
 def reader_accuracy(agent: PlannerAgent, env, taps: int = 2000, seed: int = 0) -> tuple[float, float, float]:
     """The reader's accuracy on random taps at its sensing depth (all, on the keys, off them), against
     the key a press there presses (the grid's label: a measurement's knowledge, not the agent's)."""
+    if agent.continuous is None:
+        raise SystemExit("--reader taps anywhere in the workspace: it scores continuous-task runs only")
     core = env.unwrapped._core
     rng = np.random.default_rng(seed)
     xy = rng.uniform(core._workspace_low, core._workspace_high, (taps, 2)) + core._frame_origin
@@ -152,25 +154,23 @@ def main() -> None:
         name, _, value = setting.partition("=")
         settings[name] = ast.literal_eval(value)
     rows = [traces(run, settings, args.refit) for run in args.runs]
-    width = max(len(r["run"].rstrip("/").split("/")[-1]) for r in rows) + 2
+    width = max(len(row["name"]) for row in rows) + 2
     print("run".ljust(width), "accuracy  steps  misses (press / move and press / time limit)  actions")
     for row in rows:
         misses = row["misses"]
         actions = " ".join(f"{a}:{row['actions'][a]}" for a in ACTION_NAMES if row["actions"][a])
-        name = row["run"].rstrip("/").split("/")[-1]
-        print(name.ljust(width), f"{row['accuracy']:.3f}  {row['steps']:5d}  "
+        print(row["name"].ljust(width), f"{row['accuracy']:.3f}  {row['steps']:5d}  "
               f"{misses['press']:3d} / {misses['move and press']:3d} / {misses['time limit']:3d}"
               f"{'':29s}{actions}")  # fmt: skip
     print("\nsteps a key typed right took: steps: keys")
     for row in rows:
         counts = row["right_steps"]
-        print(row["run"].rstrip("/").split("/")[-1].ljust(width),
-              "  ".join(f"{s}: {counts[s]}" for s in sorted(counts)))  # fmt: skip
+        print(row["name"].ljust(width), "  ".join(f"{s}: {counts[s]}" for s in sorted(counts)))  # fmt: skip
     if args.reader:
         print("\nreader accuracy on 2,000 random taps (all, on the keys, off them)")
         for row in rows:
             every, on, off = reader_accuracy(row["agent"], row["env"])
-            print(row["run"].rstrip("/").split("/")[-1].ljust(width), f"{every:.3f}  {on:.3f}  {off:.3f}")
+            print(row["name"].ljust(width), f"{every:.3f}  {on:.3f}  {off:.3f}")
     for row in rows:
         missed = [episode for episode in row["episodes"] if episode[0] != episode[1]][: args.show]
         for goal, typed, actions, steps in missed:
