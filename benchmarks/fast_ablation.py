@@ -59,7 +59,9 @@ VARIANTS = {
     # The key-graph planner's parts (``--algo planner``), taken away one at a time: its belief filter,
     # its optimism for moves the graph has not seen, its repeat penalty; on the discrete tasks the
     # memory of the key a cell off the keys was left from and the final press of a training episode;
-    # on the continuous ones the entry states and the exploration that presses 8 times in 10.
+    # on the continuous ones the entry states and the exploration that presses 8 times in 10; on the
+    # discrete ones (session 35) the occupancy its backtracking reads with and the worthless generic
+    # nothing of its value iteration.
     "planner-no-filter": ("fast-tactile", {"agent": {"filter": False}}),
     "planner-no-optimism": ("fast-tactile", {"agent": {"optimism": False}}),
     "planner-no-repeat-penalty": ("fast-tactile", {"agent": {"repeat_penalty": 0.0}}),
@@ -67,6 +69,8 @@ VARIANTS = {
     "planner-no-final-press": ("fast-tactile", {"final_press": False}),
     "planner-no-entry-memory": ("fast-tactile", {"agent": {"entry_memory": False}}),
     "planner-uniform-exploration": ("fast-tactile", {"agent": {"explore_press": None}}),
+    "planner-no-occupancy": ("fast-tactile", {"agent": {"backtrack_prior": False}}),
+    "planner-no-lost-value": ("fast-tactile", {"agent": {"lost_value": None}}),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
                    VARIANTS.items())  # fmt: skip

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.agents.planner import MOVES, PRESS, PlannerAgent
+from tactile_braille.agents.planner import MOVES, PRESS, PlannerAgent, reckon_offsets
 from tactile_braille.agents.report import load_run
 from tactile_braille.agents.run import CHECKPOINT_FILE
 from tactile_braille.agents.training import make_replay
@@ -43,12 +43,18 @@ ACTION_NAMES = "UDLR"[:MOVES] + "P" + "udlr"[:MOVES]
 
 def state_name(agent: PlannerAgent, state: int, names: list[str]) -> str:
     """A planning state's name: its class, then how it was reached: with ``entry_memory`` ``.`` (no
-    move) or the move's letter; else, off the keys, the key and the move it left by (``-`` alone: the
+    move) or the move's letter; with ``reckon``, off the keys, the key it left (``*``: the episode's
+    start) and the offset from it; else, off the keys, the key and the move it left by (``-`` alone: the
     generic nothing)."""
     if agent.config.entry_memory:
         return names[agent.state_class[state]] + ".UDLR"[state % (MOVES + 1)]
     if state <= agent.keys:
         return names[agent.state_class[state]]
+    if agent.config.reckon:  # the key (``*``: the start) and the offset from it, in rows and columns
+        offsets = reckon_offsets(agent.config.reckon)
+        anchor, offset = divmod(state - agent.keys - 1, len(offsets))
+        row, column = offsets[offset]
+        return f"-{names[anchor] if anchor < agent.keys else '*'}{row:+d}{column:+d}"
     key, move = divmod(state - agent.keys - 1, MOVES)
     return f"-{names[key]}{'UDLR'[move]}"
 

@@ -18,13 +18,17 @@ from tactile_braille.agents.planner import (
     backtrack,
     continuous_actions,
     episode_starts,
+    graph_moves,
     graph_moves_of,
     place,
     place_entry,
+    reckon_offsets,
+    reckon_shifts,
     state_classes,
 )
 from tactile_braille.agents.presets import preset_config
-from tactile_braille.envs.tasks import DISCRETE_ACTIONS
+from tactile_braille.envs.tasks import DISCRETE_ACTIONS, KEY_GRIDS
+from tactile_braille.keyboard.layout import NONE_KEY
 
 _STEPS = np.array([(-1, 0), (1, 0), (0, -1), (0, 1)])  # UP, DOWN, LEFT, RIGHT in (row, column)
 
@@ -131,6 +135,121 @@ def test_a_cell_off_the_keys_is_told_apart_by_the_key_and_the_move_before_it():
     assert place(nothing, after_up, 3, carry=True).argmax() == after_up.argmax()  # or still off the keys
     assert place(nothing, start, 3, carry=True).argmax() == keys  # by the start's way
     assert np.all(state_classes(keys)[keys:] == keys)
+
+
+def test_dead_reckoning_off_the_keys_keeps_where_the_sensor_set_out_from():
+    keys, reckon = 4, 2
+    shifts, offsets = reckon_shifts(keys, reckon), reckon_offsets(reckon)
+    assert len(offsets) == 2 * reckon * (reckon + 1)
+    assert len(shifts) == len(state_classes(keys, reckon=reckon))
+    assert np.all(state_classes(keys, reckon=reckon)[keys:] == keys)
+    nothing, on = np.eye(keys + 1)[keys], place(np.eye(keys + 1)[1], None, PRESS, shifts=shifts)
+
+    def walk(state, moves):
+        for move in moves:
+            state = place(nothing, state, move, shifts=shifts)
+        return int(state.argmax())
+
+    def named(anchor, row, column):
+        return keys + 1 + anchor * len(offsets) + offsets.tolist().index([row, column])
+
+    assert walk(on, [1, 2]) == named(1, 1, -1) == walk(on, [2, 1])  # DOWN, LEFT: the sum of the moves
+    assert walk(on, [1, 2]) != walk(place(np.eye(keys + 1)[2], None, PRESS, shifts=shifts), [1, 2])
+    assert walk(on, [1, 1, 1]) == keys  # further than reckon cells: the generic nothing
+    start = place(nothing, None, PRESS, shifts=shifts)
+    assert walk(start, [0]) == named(keys, -1, 0) and walk(start, [0, 1]) == keys  # back at the start
+    after = place(nothing, on, 3, shifts=shifts)
+    assert place(nothing, after, PRESS, shifts=shifts).argmax() == after.argmax()  # a press stays
+    one = reckon_shifts(keys, 1)  # reckon 1: nothing_memory's key-and-move states, then the start's four
+    key = np.eye(keys + 1)[1]
+    for move in range(MOVES):
+        reckoned = place(nothing, place(key, None, PRESS, shifts=one), move, shifts=one)
+        assert reckoned.argmax() == place(nothing, place(key, None, PRESS), move).argmax()
+
+
+def test_on_the_alphabet_grid_each_state_reckoned_from_a_one_cell_key_is_one_cell():
+    """Random walks on the alphabet's grid that meet no edge (an edge stop is a move that did not
+    move, which reckoning counts): every state off the keys reckoned from a key of one cell is one
+    cell, two moves off the keys too (``nothing_memory`` alone forgets the key after one)."""
+    grid = np.array(KEY_GRIDS["alphabet"])
+    names = sorted({k for k in grid.ravel() if k != NONE_KEY})
+    classes = np.array([[names.index(k) if k != NONE_KEY else len(names) for k in row] for row in grid])
+    keys, reckon = len(names), 2
+    shifts, width = reckon_shifts(keys, reckon), len(reckon_offsets(reckon))
+    cells: dict[int, set] = {}
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        cell = (int(rng.integers(4)), int(rng.integers(10)))
+        state = place(np.eye(keys + 1)[classes[cell]], None, PRESS, shifts=shifts)
+        for _ in range(12):
+            inside = [m for m in range(MOVES)
+                      if 0 <= cell[0] + _STEPS[m][0] < 4 and 0 <= cell[1] + _STEPS[m][1] < 10]  # fmt: skip
+            move = inside[rng.integers(len(inside))]
+            cell = (cell[0] + _STEPS[move][0], cell[1] + _STEPS[move][1])
+            state = place(np.eye(keys + 1)[classes[cell]], state, move, shifts=shifts)
+            named = int(state.argmax())
+            anchor = (named - keys - 1) // width
+            if named > keys and anchor < keys and names[anchor] != "SPACE":
+                cells.setdefault(named, set()).add(cell)
+    assert len(cells) >= 12 and all(len(c) == 1 for c in cells.values())
+    offsets = reckon_offsets(reckon)[(np.array(list(cells)) - keys - 1) % width]
+    assert np.abs(offsets).sum(-1).max() == 2
+
+
+def test_an_unseen_reckoned_state_backs_off_to_the_pooled_moves_as_a_translation():
+    keys, reckon = 4, 1
+    shifts = reckon_shifts(keys, reckon)
+    states = len(shifts)
+    counts = np.zeros((states, MOVES, states))
+    counts[keys + 1, 0, 0] = 3.0  # nothing UP of key 0, moved UP: key 0 (an edge stop)
+    counts[keys, 2, shifts[keys, 2]] = 1.0  # the start off the keys, moved LEFT: still off them
+    moves = graph_moves(counts, keys, prior=1e-6, backoff=1.0, shifts=shifts)
+    unseen = keys + 1 + 3 * MOVES + 1  # nothing below key 3, never visited
+    assert moves[unseen, 0, 0] == pytest.approx(1.0, abs=1e-4)  # UP: the keys the moves off the keys reached
+    assert moves[unseen, 2, shifts[unseen, 2]] == pytest.approx(1.0, abs=1e-4)  # LEFT: one move further on
+    pooled = graph_moves(counts, keys, prior=1e-6, backoff=1.0)  # without: off the keys at the start's
+    assert pooled[unseen, 2, shifts[keys, 2]] == pytest.approx(1.0, abs=1e-4)
+
+
+def test_the_backtracked_belief_is_read_with_how_often_each_state_is_occupied():
+    """Many rarely occupied states off the keys that lead to key 0 by UP, as the key itself does (an
+    edge stop): without the occupancy they outvote it, and the frame before is read as nothing."""
+    keys = 3
+    classes = state_classes(keys)
+    states = len(classes)
+    moves = np.full((states, MOVES, states), 1e-9)
+    moves[:, :, keys] = 1.0  # elsewhere: off the keys
+    moves[0, 0] = 0.0
+    moves[0, 0, 0] = 1.0
+    moves[keys:, 0] = 0.0
+    moves[keys:, 0, 0] = 1.0
+    moves /= moves.sum(-1, keepdims=True)
+    anchors = np.array([-1, 0])  # frame 0 then UP to frame 1, pressed there: key 0
+    args = (moves, classes, anchors, np.array([0, 1]), np.array([0, PRESS]), np.array([-1, 0]),
+            np.array([0]), np.array([1]), 1.0, 0.9)  # fmt: skip
+    assert backtrack(*args)[0] == keys  # nothing, 13 states against one
+    occupancy = np.r_[np.full(keys, 1000.0), np.ones(states - keys)]
+    assert backtrack(*args, occupancy=occupancy)[0] == 0
+
+
+def test_a_move_into_the_generic_nothing_is_worth_its_share_of_that_state_s_value(discrete_env):
+    """The generic nothing's pooled moves are a lottery drawn again at each step (every cell off the
+    keys at once): with ``lost_value`` 0 a plan into it from a key is worth nothing, and its own moves
+    keep their value."""
+    values = {}
+    for lost in (None, 0.0):
+        config = PlannerConfig(gamma=0.9, lost_value=lost)
+        agent = PlannerAgent(discrete_env.observation_space, discrete_env.action_space, config)
+        keys, states = agent.keys, len(agent.state_class)
+        moves = np.zeros((states, MOVES, states))
+        moves[np.arange(states), :, np.arange(states)] = 1.0  # every move stays, but:
+        moves[0, 3] = np.eye(states)[keys]  # key 0, RIGHT: the generic nothing
+        moves[keys, 0] = 0.3 * np.eye(states)[2] + 0.7 * np.eye(states)[keys]  # there UP: key 2, 3 in 10
+        given_graph(agent, moves)
+        values[lost] = agent._values[2]
+    generic = 0.9 * 0.3 / (1 - 0.9 * 0.7)
+    assert values[None][keys] == pytest.approx(generic) and values[0.0][keys] == pytest.approx(generic)
+    assert values[None][0] == pytest.approx(0.9 * generic) and values[0.0][0] == 0.0
 
 
 def test_backtracking_labels_the_frames_before_a_press_with_the_keys_they_show(discrete_env):
@@ -256,6 +375,13 @@ def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
         PlannerConfig(entry_memory=True, nothing_carry=True)
     with pytest.raises(ValueError, match="explore_press is a probability"):
         PlannerConfig(explore_press=-0.1)
+    with pytest.raises(ValueError, match="lost_value is a share"):
+        PlannerConfig(lost_value=1.5)
+    with pytest.raises(ValueError, match="reckon is a form of nothing_memory"):
+        PlannerConfig(reckon=2, nothing_carry=True)
+    with pytest.raises(ValueError, match="a continuous task has none"):
+        env = gym.make(CONTINUOUS_TASK)
+        PlannerAgent(env.observation_space, env.action_space, PlannerConfig(reckon=2))
     with pytest.raises(ValueError, match=r"Discrete\(5\) actions or the continuous tasks' Box"):
         PlannerAgent(discrete_observation_space(), gym.spaces.Box(-1.0, 1.0, (2,)))
 

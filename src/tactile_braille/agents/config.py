@@ -407,6 +407,24 @@ class PlannerConfig:
             reading (the reader's probabilities over the class prior, raised to this power: a
             backward Bayes filter); 0: the graph alone. On the continuous tasks a move's end is not
             one key, and the graph alone stops the labelling a step or two before the press.
+        backtrack_prior: going back from a press, a frame's class is read from the backtracked
+            belief weighed by how often each state is occupied in the replay (Bayes' rule: ``P(state
+            | key pressed later) ∝ P(key pressed later | state) P(state)``); False: every state
+            equally likely, so that many rarely occupied states off the keys that also lead to the key
+            outweigh the key itself (a frame of P, from which UP stays on P, read as the cell under it).
+        reckon: on the discrete tasks, dead reckoning off the keys: a frame that reads *nothing* is
+            placed by the key (or the episode's start off the keys) it last left and the sum of the
+            moves since, up to this many cells away (further: the generic *nothing*), in place of
+            ``nothing_memory``'s key and last move alone (1 is that, with the start's four more). A
+            move off the keys then does not forget where it set out from, and each such state backs
+            off to the pooled moves off the keys as a translation: ``backoff`` pseudo-counts of the
+            keys the moves off the keys reach, and of staying off them one move further on. 0: off.
+        lost_value: a move into the generic *nothing* (which forgets where the sensor is; with
+            ``entry_memory``, into any of nothing's five states) is worth this share of that state's
+            value in the value iteration; its own moves are valued as they are. The generic nothing is
+            every cell off the keys at once, and its pooled moves promise each of the keys beside them
+            at every step (a lottery drawn again at each move), so a plan through it looks shorter
+            than it is. None: its value as it is.
     """
 
     gamma: float = 0.9
@@ -437,6 +455,9 @@ class PlannerConfig:
     move_press: bool = False
     free_repeats: int | None = None
     backtrack_evidence: float = 0.0
+    backtrack_prior: bool = False
+    reckon: int = 0
+    lost_value: float | None = None
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
@@ -457,6 +478,12 @@ class PlannerConfig:
             problems.append(f"accept is a probability in (0, 1], got {self.accept}")
         if not 0.0 < self.move <= 1.0:
             problems.append(f"move is a share of the largest move, in (0, 1], got {self.move}")
+        if self.lost_value is not None and not 0.0 <= self.lost_value <= 1.0:
+            problems.append(f"lost_value is a share in [0, 1], got {self.lost_value}")
+        if self.reckon < 0:
+            problems.append(f"reckon must not be negative, got {self.reckon}")
+        if self.reckon and (self.entry_memory or self.nothing_carry or not self.nothing_memory):
+            problems.append("reckon is a form of nothing_memory that entry_memory and nothing_carry replace")
         if self.entry_memory and self.nothing_carry:
             problems.append("nothing_carry is a form of the states off the keys that entry_memory replaces")
         if self.explore_press is not None and not 0.0 <= self.explore_press <= 1.0:

@@ -120,25 +120,69 @@ class KeyGraph(nn.Module):
     move m from state s), ``visits[s, m]`` the (soft) moves counted, and ``prior[c]`` each class's share
     of the labels."""
 
-    def __init__(self, keys: int, entry: bool = False) -> None:
+    def __init__(self, keys: int, entry: bool = False, reckon: int = 0) -> None:
         super().__init__()
-        states = len(state_classes(keys, entry))
+        states = len(state_classes(keys, entry, reckon))
         self.register_buffer("moves", torch.full((states, MOVES, states), 1.0 / states))
         self.register_buffer("visits", torch.zeros(states, MOVES))
         self.register_buffer("prior", torch.full((keys + 1,), 1.0 / (keys + 1)))
 
 
-def state_classes(keys: int, entry: bool = False) -> np.ndarray:
+def state_classes(keys: int, entry: bool = False, reckon: int = 0) -> np.ndarray:
     """The class each planning state reads: the ``keys`` key states, then *nothing* (an episode's
     start or after nothing), then nothing reached from key k by move m (state ``keys + 1 + k * 4 + m``):
     cells off the keys all read alike, and the key and the move before one tell them apart.
 
     With ``entry`` (:func:`place_entry`): each class (the keys, then nothing) five times over, as
     reached by no move (an episode's start, a press) and by each of the four moves (state ``c * 5 + e``).
+
+    With ``reckon`` (dead reckoning, :func:`reckon_shifts`): the keys, *nothing* (an episode's start off
+    the keys, or lost), then nothing at each of :func:`reckon_offsets` from each key and from the
+    episode's start (state ``keys + 1 + anchor * offsets + offset``, the start's anchor ``keys``): with
+    ``reckon`` 1 the key-and-move states above, then the start's four.
     """
     if entry:
         return np.repeat(np.arange(keys + 1), MOVES + 1)
-    return np.r_[np.arange(keys), np.full(1 + keys * MOVES, keys)]
+    anchors = keys + 1 if reckon else keys
+    return np.r_[np.arange(keys), np.full(1 + anchors * max(len(reckon_offsets(reckon)), MOVES), keys)]
+
+
+UNIT_MOVES = np.array([(-1, 0), (1, 0), (0, -1), (0, 1)])
+"""Each move's documented step on a discrete task's grid, (rows, columns): UP, DOWN, LEFT, RIGHT."""
+
+
+def reckon_offsets(reckon: int) -> np.ndarray:
+    """The displacements (rows, columns) dead reckoning keeps, (n, 2): the four moves' own first, in
+    their order, then the others up to ``reckon`` cells (by distance, then row and column); none for 0."""
+    rest = [
+        (r, c)
+        for r in range(-reckon, reckon + 1)
+        for c in range(-reckon, reckon + 1)
+        if 1 < abs(r) + abs(c) <= reckon
+    ]
+    rest.sort(key=lambda d: (abs(d[0]) + abs(d[1]), d))
+    return np.array([*UNIT_MOVES.tolist(), *rest]).reshape(-1, 2) if reckon else np.zeros((0, 2), int)
+
+
+def reckon_shifts(keys: int, reckon: int) -> np.ndarray:
+    """Where a frame that reads *nothing* is placed after each move from each state (states, moves), by
+    dead reckoning (:func:`state_classes`): from a key or the start, at the move's offset from it; from
+    nothing at an offset, at the offset plus the move's (back at the start: the start); further than
+    ``reckon`` cells, or back on the key it left (that reads as a key), in the generic *nothing*."""
+    offsets = reckon_offsets(reckon)
+    index = {tuple(d): i for i, d in enumerate(offsets.tolist())}
+    start = keys
+    shifts = np.full((len(state_classes(keys, reckon=reckon)), MOVES), start)
+    for anchor in range(keys + 1):
+        base = keys + 1 + anchor * len(offsets)
+        from_anchor = start if anchor == keys else anchor
+        shifts[from_anchor] = base + np.arange(MOVES)
+        for o, d in enumerate(offsets):
+            for m, step in enumerate(UNIT_MOVES):
+                target = tuple((d + step).tolist())
+                if target in index:
+                    shifts[base + o, m] = base + index[target]
+    return shifts
 
 
 def place_entry(reading: np.ndarray, action: int | None) -> np.ndarray:
@@ -153,14 +197,20 @@ def place_entry(reading: np.ndarray, action: int | None) -> np.ndarray:
 
 
 def place(
-    reading: np.ndarray, before: np.ndarray | None, action: int, memory: bool = True, carry: bool = False
+    reading: np.ndarray,
+    before: np.ndarray | None,
+    action: int,
+    memory: bool = True,
+    carry: bool = False,
+    shifts: np.ndarray | None = None,
 ) -> np.ndarray:
     """A frame's state distribution from its class probabilities (keys, then nothing), the state
     distribution of the frame before it (None: an episode's first) and the action between; without
     ``memory`` every frame that reads nothing is in the one state *nothing*. With ``carry`` a move from
-    nothing to nothing keeps the key and the move by which the sensor left the keys (else: *nothing*)."""
+    nothing to nothing keeps the key and the move by which the sensor left the keys (else: *nothing*).
+    With ``shifts`` (:func:`reckon_shifts`) nothing after a move is where dead reckoning puts it."""
     keys = len(reading) - 1
-    state = np.zeros(keys + 1 + keys * MOVES)
+    state = np.zeros(keys + 1 + keys * MOVES if shifts is None else len(shifts))
     state[:keys] = reading[:keys]
     nothing = reading[keys]
     if before is None or not memory:
@@ -172,6 +222,8 @@ def place(
             state[keys:] = nothing * off_keys / total
         else:
             state[keys] = nothing
+    elif shifts is not None:
+        np.add.at(state, shifts[:, action], nothing * before)
     else:
         state[keys + 1 + np.arange(keys) * MOVES + action] = nothing * before[:keys]
         if carry:
@@ -228,12 +280,17 @@ class PlannerAgent(Agent):
         self.actions = len(DISCRETE_ACTIONS) + MOVES * config.move_press
         self.keys, _ = spaces_sizes(observation_space)
         self.classes = self.keys + 1  # the keys, then nothing (a cell off the keys)
-        entry = self.config.entry_memory
-        self.state_class = state_classes(self.keys, entry)
+        entry, reckon = self.config.entry_memory, self.config.reckon
+        if reckon and not discrete:
+            raise ValueError("reckon counts a discrete task's grid cells: a continuous task has none")
+        self.state_class = state_classes(self.keys, entry, reckon)
+        self.shifts = reckon_shifts(self.keys, reckon) if reckon else None
         # The state of an episode's start off the keys, where the repeat penalty does not apply.
         self.start_nothing = self.keys * (MOVES + 1) if entry else self.keys
+        # The states ``lost_value`` discounts: the generic nothing; with entry states, all of nothing's.
+        self.lost_states = np.flatnonzero(self.state_class == self.keys) if entry else np.array([self.keys])
         self.reader = KeyReader(self.classes, self.config.hidden).to(self.device)
-        self.graph = KeyGraph(self.keys, entry).to(self.device)
+        self.graph = KeyGraph(self.keys, entry, reckon).to(self.device)
         self.optimiser = adam(self.reader.parameters(), self.config.learning_rate, self.config.adam_eps)
         self.label_frames = np.zeros(0, dtype=np.int64)  # frame slots of the replay with a class
         self.label_classes = np.zeros(0, dtype=np.int64)
@@ -291,8 +348,9 @@ class PlannerAgent(Agent):
             return place_entry(reading, action)
         config = self.config
         return place(
-            reading, before, PRESS if action is None else action, config.nothing_memory, config.nothing_carry
-        )
+            reading, before, PRESS if action is None else action, config.nothing_memory, config.nothing_carry,
+            self.shifts,
+        )  # fmt: skip
 
     def action_values(self, belief: np.ndarray, goal: int) -> np.ndarray:
         """QMDP values of the actions under ``belief`` (over states) for the goal key ``goal``: the
@@ -440,9 +498,11 @@ class PlannerAgent(Agent):
                 chosen = actions == move
                 counts[:, move, :] = states_this[chosen].T @ states_after[chosen]
             off_keys = len(self.state_class) if self.config.entry_memory else self.keys  # none pooled
-            moves = graph_moves(counts, off_keys, self.config.graph_prior, self.config.backoff)
+            moves = graph_moves(counts, off_keys, self.config.graph_prior, self.config.backoff, self.shifts)
+            occupancy = states_this.sum(0) + 1e-3 if self.config.backtrack_prior else None
             labels = backtrack(moves, self.state_class, anchors, row_this, actions, achieved, starts, ends,
-                               self.config.sharpen, self.config.accept, moved, evidence)  # fmt: skip
+                               self.config.sharpen, self.config.accept, moved, evidence,
+                               occupancy)  # fmt: skip
         self.graph.moves.copy_(torch.as_tensor(moves))
         visits = counts.sum(-1)
         visits[off_keys:] = visits[off_keys:].sum(0)  # a state off the keys borrows the others' moves
@@ -462,10 +522,18 @@ class PlannerAgent(Agent):
         if self.config.move_press:  # a move and a press: the goal reached and pressed in this step
             rewards = np.maximum(rewards, np.einsum("smt,gt->gsm", self._moves, rewards).max(-1))
         values = rewards.copy()
+        lost = self.config.lost_value
         for _ in range(self.config.planning_sweeps):
-            values = np.maximum(
-                rewards, self.config.gamma * np.einsum("smt,gt->gsm", self._moves, values).max(-1)
-            )
+            ahead = values
+            if lost is not None:  # the generic nothing, entered from elsewhere
+                ahead = values.copy()
+                ahead[:, self.lost_states] *= lost
+            backed = self.config.gamma * np.einsum("smt,gt->gsm", self._moves, ahead).max(-1)
+            if ahead is not values:  # acting from it, its own moves as they are
+                backed[:, self.lost_states] = self.config.gamma * np.einsum(
+                    "smt,gt->gsm", self._moves[self.lost_states], values
+                ).max(-1)
+            values = np.maximum(rewards, backed)
         self._values = values
 
     def load_state_dict(self, state: dict) -> None:
@@ -478,14 +546,25 @@ class PlannerAgent(Agent):
         self._plan()
 
 
-def graph_moves(counts: np.ndarray, keys: int, prior: float, backoff: float) -> np.ndarray:
+def graph_moves(
+    counts: np.ndarray, keys: int, prior: float, backoff: float, shifts: np.ndarray | None = None
+) -> np.ndarray:
     """``P(state' | state, move)`` from soft counts (states, moves, states): a key state's with
     ``prior`` pseudo-counts spread evenly; a state off the keys' with ``backoff`` pseudo-counts spread as
-    the moves of all states off the keys together (it is seen more rarely than any key)."""
+    the moves of all states off the keys together (it is seen more rarely than any key). With
+    ``shifts`` (dead reckoning, :func:`reckon_shifts`) those pooled moves are a translation: the keys
+    they reach as they are, and all they stay off the keys at the state the move shifts to."""
     moves = counts + prior / counts.shape[-1]
     pooled = counts[keys:].sum(0) + prior / counts.shape[-1]
     pooled /= pooled.sum(-1, keepdims=True)
-    moves[keys:] = counts[keys:] + backoff * pooled
+    if shifts is None:
+        moves[keys:] = counts[keys:] + backoff * pooled
+    else:
+        backed = np.zeros_like(counts[keys:])
+        backed[:, :, :keys] = pooled[None, :, :keys]
+        off_states = np.arange(len(backed))[:, None]
+        backed[off_states, np.arange(MOVES)[None], shifts[keys:]] += pooled[:, keys:].sum(-1)[None]
+        moves[keys:] = counts[keys:] + backoff * backed
     return moves / moves.sum(-1, keepdims=True)
 
 
@@ -524,6 +603,7 @@ def backtrack(
     accept: float,
     moved: np.ndarray | None = None,
     evidence: np.ndarray | None = None,
+    occupancy: np.ndarray | None = None,
 ) -> np.ndarray:
     """Each frame's class: its own press's (``anchors``, -1 for none), or one read back from the key
     its episode pressed.
@@ -542,6 +622,9 @@ def backtrack(
             press moved).
         evidence: each frame's likelihood of each class (frames, classes), weighed into the belief
             of the frame it reaches going back (a backward Bayes filter); None: the graph alone.
+        occupancy: how often each state is occupied (states,), the prior the backtracked belief is
+            read with (``P(state | key pressed later) ∝ P(key pressed later | state) P(state)``); None:
+            every state alike.
     """
     labels = anchors.copy()
     sharp = moves**sharpen
@@ -557,7 +640,8 @@ def backtrack(
             if evidence is not None:
                 belief = belief * evidence[rows[step]][state_class]
             belief /= max(belief.sum(), 1e-300)
-            read = belief @ collapse
+            posterior = belief if occupancy is None else belief * occupancy
+            read = posterior @ collapse / max(posterior.sum(), 1e-300)
             if read.max() < accept:
                 break
             if labels[rows[step]] < 0:

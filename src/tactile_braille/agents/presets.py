@@ -233,7 +233,15 @@ def planner_changes(task: str) -> dict[str, Any]:
     moves are 18 mm (``move`` 0.9; tuned on its seed 100, session 34), shorter than nearly every key
     along a row (18-21 mm, a 19 mm pitch): a move of 20 mm from a key's far edge skips the key beside
     it, and the planner then circles between the keys on either side, or presses the one it skipped
-    to."""
+    to.
+
+    On the discrete tasks (tuned on seeds 100 and 101 of the alphabet and 100 of the arrows, session 35)
+    its backtracking reads each frame's class with how often each state is occupied (``backtrack_prior``:
+    the many rarely occupied states off the keys outvoted the keys beside them, labelling frames of P,
+    X or SPACE *nothing*), and its value iteration gives a move into the generic *nothing* none of that
+    state's value (``lost_value`` 0): the generic nothing stands for every cell off the keys at once,
+    and its pooled moves promised a key beside the cells off the keys at each step, so that plans went
+    through it and timed out there."""
     kind, keys = family(task)
     changes: dict[str, Any] = {
         "epochs": PLANNER_EPOCHS.get(family(task), FAST_TACTILE_EPOCHS[family(task)]),
@@ -242,6 +250,8 @@ def planner_changes(task: str) -> dict[str, Any]:
         "updates_per_step": 1,
         "replay": {"relabel": "all"},
     }
+    if kind == "discrete":
+        changes["agent"] = {"backtrack_prior": True, "lost_value": 0.0}
     if kind == "continuous":
         changes["agent"] = {
             "sense_depth": -1 / 3,
