@@ -4,13 +4,17 @@ Types the paper's sequences (the paper's protocol, seed 0, as ``tactile-braille 
 last checkpoint of planner runs and prints, run by run side by side: accuracy and steps, the steps a
 key took (typed right), how often each kind of action was taken (moves, presses and moves that end
 in a press), and how each miss happened: a press where the sensor stood, a move that ended in a press,
-or the time limit. With ``--reader`` it also reads the key under the sensor from random taps over the
-workspace at the planner's sensing depth, and scores the reader against the key the grid says is
-there (on the keys and off them). ``--show N`` prints N missed keys' actions a run, and at each
-step the class read and the state believed (``read>believed``). Both need what only a measurement
-may know (the grid's keys, the pose), never given to the agent: a diagnostic, not a result.
+or the time limit. With ``--reader`` it also reads the key under the sensor from random taps (at
+random cells of a discrete task's grid; anywhere in a continuous task's workspace, at the planner's
+sensing depth), and scores the reader against the key the grid says is there (on the keys and off
+them). ``--show N`` prints N missed keys' actions a run, and at each step the class read and the
+state believed (``read>believed``). ``--refit --labels`` scores the refit's labels against the key
+under each labelled frame (found from the stored sample the frame is). All three need what only a
+measurement may know (the grid's keys, the pose), never given to the agent: a diagnostic, not a
+result.
 
     python benchmarks/planner_traces.py RUN_DIR [RUN_DIR ...] [--reader] [--show 5] [--set free_repeats=1]
+    python benchmarks/planner_traces.py RUN_DIR --refit --labels --set backtrack_prior=False
 
 ``--set NAME=VALUE`` types with a planner setting changed from the run's (one that acts at test time,
 such as ``gamma``, ``free_repeats`` or ``repeat_penalty``; the learnt reader and graph are the run's);
@@ -23,6 +27,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import hashlib
 from collections import Counter
 from pathlib import Path
 
@@ -97,6 +102,8 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
                 )
         buffer.load(Path(run_dir) / state["replay"])
         agent.refit(buffer)
+    else:
+        buffer = None
     keys = task_of(config.task).keys
     recorder = Recorder(agent, [*env.unwrapped.goal_keys, "-"])
     result = type_sequences(recorder, env, paper_sequences(keys), seed=0, protocol="paper")
@@ -115,26 +122,66 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
         "steps": result.total_steps, "misses": misses,
         "right_steps": Counter(s for s, g, t in zip(steps, goals, typed, strict=True) if g == t),
         "actions": Counter(ACTION_NAMES[a] for episode in recorder.episodes for a in episode),
-        "episodes": list(zip(goals, typed, recorder.episodes, recorder.steps, strict=True)),
+        "episodes": list(zip(goals, typed, recorder.episodes, recorder.steps, strict=True)), "buffer": buffer,
     }  # fmt: skip
 
 
-def reader_accuracy(agent: PlannerAgent, env, taps: int = 2000, seed: int = 0) -> tuple[float, float, float]:
-    """The reader's accuracy on random taps at its sensing depth (all, on the keys, off them), against
-    the key a press there presses (the grid's label: a measurement's knowledge, not the agent's)."""
-    if agent.continuous is None:
-        raise SystemExit("--reader taps anywhere in the workspace: it scores continuous-task runs only")
+def reader_accuracy(agent: PlannerAgent, env, taps: int = 2000, seed: int = 0) -> tuple[float, float, float, Counter]:
+    """The reader's accuracy on random taps (all, on the keys, off them) and its confusions ((truth,
+    read) names: count): on a discrete task at random cells of the grid, on a continuous one anywhere
+    in the workspace at its sensing depth, against the key a press there presses (the grid's label: a
+    measurement's knowledge, not the agent's)."""
     core = env.unwrapped._core
     rng = np.random.default_rng(seed)
-    xy = rng.uniform(core._workspace_low, core._workspace_high, (taps, 2)) + core._frame_origin
-    sense = 5 + 3 * agent.config.sense_depth + core._depth_shift_mm
-    frames, _ = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, sense), rng)
-    _, pressed = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, 10.0), rng)
-    truth = core._goal_of_code[pressed]
+    if agent.continuous is None:
+        rows, columns = core.grid_codes.shape
+        r, c = rng.integers(rows, size=taps), rng.integers(columns, size=taps)
+        codes = core.grid_codes[r, c]
+        frames, _ = core.backend.discrete_taps(codes, np.zeros(taps, bool), core.cell_positions_mm[r, c], rng)
+        pressed = codes
+    else:
+        xy = rng.uniform(core._workspace_low, core._workspace_high, (taps, 2)) + core._frame_origin
+        sense = 5 + 3 * agent.config.sense_depth + core._depth_shift_mm
+        frames, _ = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, sense), rng)
+        _, pressed = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, 10.0), rng)
+    truth = core._goal_of_code[pressed]  # code -1, and a key not the task's: -1
     truth = np.where(truth < 0, agent.keys, truth)
-    right = agent.read(frames.reshape(taps, 100, 100, 1)).argmax(-1) == truth
-    on_keys = truth < agent.keys
-    return float(right.mean()), float(right[on_keys].mean()), float(right[~on_keys].mean())
+    read = agent.read(frames.reshape(taps, 100, 100, 1)).argmax(-1)
+    right, on_keys = read == truth, truth < agent.keys
+    names = [*env.unwrapped.goal_keys, "-"]
+    confusions = Counter((names[t], names[r]) for t, r in zip(truth, read, strict=True) if t != r)
+    return float(right.mean()), float(right[on_keys].mean()), float(right[~on_keys].mean()), confusions
+
+
+def label_truth(row: dict) -> np.ndarray:
+    """The class of each labelled frame of a refit (``--refit``): the key a press would press where it
+    was taken (from the stored sample each frame is: a measurement's knowledge), the task's keys, then
+    nothing."""
+    agent, env = row["agent"], row["env"]
+    core, buffer = env.unwrapped._core, row["buffer"]
+    backend = core.backend
+    if agent.continuous is None:  # the dataset's samples of each key (code + 1: row 0 is NONE)
+        code_of = np.full(len(backend.observations), -1)
+        for slot, count in enumerate(backend._counts):
+            code_of[backend._table[slot, :count]] = slot - 1
+    else:  # a sample's key: what the deepest tap at its place presses
+        flat = np.empty(len(backend._grid_rows), np.int64)
+        flat[backend._grid_rows] = np.arange(len(flat))  # each sample's cell of the stored grid
+        depths = backend._grid_shape[2]
+        code_of = backend._grid_pressed[backend._grid_rows[flat // depths * depths + depths - 1]]
+    index = {hashlib.sha1(frame.tobytes()).digest(): i for i, frame in enumerate(backend.observations)}
+    frames = buffer.store.observations(agent.label_frames)
+    codes = code_of[[index[hashlib.sha1(frame.tobytes()).digest()] for frame in frames]]
+    truth = core._goal_of_code[codes]
+    return np.where(truth < 0, agent.keys, truth)
+
+
+def label_accuracy(row: dict) -> tuple[int, Counter]:
+    """A refit's labels scored against :func:`label_truth`: labelled frames, confusions ((truth,
+    label) names: count)."""
+    truth, labels = label_truth(row), row["agent"].label_classes
+    names = [*row["env"].unwrapped.goal_keys, "-"]
+    return len(truth), Counter((names[t], names[c]) for t, c in zip(truth, labels, strict=True) if t != c)
 
 
 def main() -> None:
@@ -154,7 +201,12 @@ def main() -> None:
         action="store_true",
         help="refit the graph and labels from the run's last replay with --set's settings",
     )
+    parser.add_argument(
+        "--labels", action="store_true", help="with --refit: score its labels against the taps' keys"
+    )
     args = parser.parse_args()
+    if args.labels and not args.refit:
+        parser.error("--labels scores a refit's labels: add --refit")
     settings = {}
     for setting in args.set:
         name, _, value = setting.partition("=")
@@ -173,10 +225,17 @@ def main() -> None:
         counts = row["right_steps"]
         print(row["name"].ljust(width), "  ".join(f"{s}: {counts[s]}" for s in sorted(counts)))  # fmt: skip
     if args.reader:
-        print("\nreader accuracy on 2,000 random taps (all, on the keys, off them)")
+        print("\nreader accuracy on 2,000 random taps (all, on the keys, off them), then its commonest confusions")
         for row in rows:
-            every, on, off = reader_accuracy(row["agent"], row["env"])
-            print(row["name"].ljust(width), f"{every:.3f}  {on:.3f}  {off:.3f}")
+            every, on, off, confusions = reader_accuracy(row["agent"], row["env"])
+            common = ", ".join(f"{t} read {r}: {n}" for (t, r), n in confusions.most_common(5))
+            print(row["name"].ljust(width), f"{every:.3f}  {on:.3f}  {off:.3f}   {common}")
+    if args.labels:
+        print("\nthe refit's labels: labelled frames, wrong labels, then the commonest (truth labelled as)")
+        for row in rows:
+            labels, wrong = label_accuracy(row)
+            common = ", ".join(f"{t} as {c}: {n}" for (t, c), n in wrong.most_common(5))
+            print(row["name"].ljust(width), f"{labels:5d}  {sum(wrong.values()):4d}   {common}")
     for row in rows:
         missed = [episode for episode in row["episodes"] if episode[0] != episode[1]][: args.show]
         for goal, typed, actions, steps in missed:

@@ -135,3 +135,31 @@ def test_tap_identifiability_finds_twin_start_images_far_apart(env_datasets):
     assert all(image.shape == (10_000,) and set(np.unique(image)) <= {0, 1} for image, _ in seen)
     # the nearest-sample lookup: one image per grid sample, its starts within one cell of the 5 mm test grid
     assert all(np.ptp(poses, axis=0).max() <= 5.0 for _, poses in seen) and len(seen) > 10
+
+
+def test_planner_traces_scores_the_reader_and_the_refit_labels_against_the_taps_keys(env_datasets, tmp_path):
+    from tactile_braille.agents import PlannerConfig
+    from tactile_braille.agents.planner import PRESS
+
+    script = _load("planner_traces")
+    config = TrainConfig(task=ARROWS, algo="planner", epochs=1, steps_per_epoch=60, start_steps=0, threads=1,
+                         dataset=str(env_datasets[ARROWS]), agent=PlannerConfig(batch_size=8, refit_every=10),
+                         replay={"relabel": "all"}, evaluation={"test_episodes": 1})  # fmt: skip
+    run = train(config, run_dir=tmp_path / "planner", progress=False)
+    row = script.traces(str(run), refit=True)
+    assert 0.0 <= row["accuracy"] <= 1.0 and sum(row["misses"].values()) <= len(row["episodes"])
+    every, on, off, confusions = script.reader_accuracy(row["agent"], row["env"], taps=400)
+    assert 0.0 <= min(every, on, off) and max(every, on, off) <= 1.0
+    assert sum(confusions.values()) == round((1 - every) * 400)
+    agent, buffer = row["agent"], row["buffer"]
+    truth = script.label_truth(row)
+    labels, wrong = script.label_accuracy(row)
+    assert labels == len(truth) == len(agent.label_frames) > 0
+    assert sum(wrong.values()) == int((truth != agent.label_classes).sum())
+    # A press's frame shows the key it pressed (its achieved goal): the truth read from the stored
+    # samples agrees there.
+    slots = np.flatnonzero((buffer.actions[: buffer.size] == PRESS) & (buffer.achieved[: buffer.size] >= 0))
+    frames = buffer.frame_index[slots, 0]
+    where = {frame: i for i, frame in enumerate(agent.label_frames)}
+    assert len(slots) > 0
+    np.testing.assert_array_equal([truth[where[f]] for f in frames], buffer.achieved[slots])

@@ -30,6 +30,14 @@ off the keys, only after ``free_repeats``: there repeating the best move is a
 straight line out, until it meets the workspace's edge).
 Exploring, it acts at random with the probability ``epsilon``.
 
+The generic *nothing* is every cell off the keys at once, and its pooled moves reach each key beside
+them with some probability: value iteration reads that as a draw made again at every step, and a plan
+through it looks shorter than any real path. ``lost_value`` gives a move into it only that share of
+its value (its own moves keep theirs). ``backtrack_prior`` reads the backtracked belief with each
+state's occupancy in the replay, so that the many rarely occupied states off the keys do not outvote
+the key beside them. ``reckon`` is dead reckoning off the keys on the discrete tasks: nothing placed by
+the key it last left and the sum of the moves since (:func:`reckon_shifts`).
+
 Everything it learns from is in the observation dictionary (frames, previous
 actions, achieved goals): the ``tactile`` track. It knows the actions'
 documented meaning (four moves and a press), not the layout.
