@@ -126,7 +126,9 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
     }  # fmt: skip
 
 
-def reader_accuracy(agent: PlannerAgent, env, taps: int = 2000, seed: int = 0) -> tuple[float, float, float, Counter]:
+def reader_accuracy(
+    agent: PlannerAgent, env, taps: int = 2000, seed: int = 0
+) -> tuple[float, float, float, Counter]:
     """The reader's accuracy on random taps (all, on the keys, off them) and its confusions ((truth,
     read) names: count): on a discrete task at random cells of the grid, on a continuous one anywhere
     in the workspace at its sensing depth, against the key a press there presses (the grid's label: a
@@ -225,7 +227,7 @@ def main() -> None:
         counts = row["right_steps"]
         print(row["name"].ljust(width), "  ".join(f"{s}: {counts[s]}" for s in sorted(counts)))  # fmt: skip
     if args.reader:
-        print("\nreader accuracy on 2,000 random taps (all, on the keys, off them), then its commonest confusions")
+        print("\nreader accuracy on 2,000 random taps (all, on the keys, off them), its commonest confusions")
         for row in rows:
             every, on, off, confusions = reader_accuracy(row["agent"], row["env"])
             common = ", ".join(f"{t} read {r}: {n}" for (t, r), n in confusions.most_common(5))

@@ -149,7 +149,7 @@ def test_planner_traces_scores_the_reader_and_the_refit_labels_against_the_taps_
     row = script.traces(str(run), refit=True)
     assert 0.0 <= row["accuracy"] <= 1.0 and sum(row["misses"].values()) <= len(row["episodes"])
     every, on, off, confusions = script.reader_accuracy(row["agent"], row["env"], taps=400)
-    assert 0.0 <= min(every, on, off) and max(every, on, off) <= 1.0
+    assert min(every, on, off) >= 0.0 and max(every, on, off) <= 1.0
     assert sum(confusions.values()) == round((1 - every) * 400)
     agent, buffer = row["agent"], row["buffer"]
     truth = script.label_truth(row)
