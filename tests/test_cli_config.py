@@ -91,6 +91,8 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = False, None
         if name == "agent.nothing_carry":  # given as its default: entry_memory replaces it (test_planner)
             value, words = False, None
+        if name == "agent.reckon":  # given as its default: entry_memory replaces it (test_planner)
+            value, words = 0, ["0"]
         flag = "--" + name.replace("_", "-")
         argv += [flag, *words] if words is not None else [flag if value else "--no-" + flag[2:]]
         wanted[name] = list(value) if isinstance(value, tuple) else value
