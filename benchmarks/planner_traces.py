@@ -126,6 +126,13 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
     }  # fmt: skip
 
 
+def task_classes(core, codes: np.ndarray, keys: int) -> np.ndarray:
+    """The planner's class of layout key codes: the task's key, or ``keys`` (nothing) for -1 and a key
+    not the task's."""
+    classes = core._goal_of_code[codes]  # code -1 maps to -1
+    return np.where(classes < 0, keys, classes)
+
+
 def reader_accuracy(
     agent: PlannerAgent, env, taps: int = 2000, seed: int = 0
 ) -> tuple[float, float, float, Counter]:
@@ -146,8 +153,7 @@ def reader_accuracy(
         sense = 5 + 3 * agent.config.sense_depth + core._depth_shift_mm
         frames, _ = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, sense), rng)
         _, pressed = core.backend.continuous_taps(xy[:, 0], xy[:, 1], np.full(taps, 10.0), rng)
-    truth = core._goal_of_code[pressed]  # code -1, and a key not the task's: -1
-    truth = np.where(truth < 0, agent.keys, truth)
+    truth = task_classes(core, pressed, agent.keys)
     read = agent.read(frames.reshape(taps, 100, 100, 1)).argmax(-1)
     right, on_keys = read == truth, truth < agent.keys
     names = [*env.unwrapped.goal_keys, "-"]
@@ -174,8 +180,7 @@ def label_truth(row: dict) -> np.ndarray:
     index = {hashlib.sha1(frame.tobytes()).digest(): i for i, frame in enumerate(backend.observations)}
     frames = buffer.store.observations(agent.label_frames)
     codes = code_of[[index[hashlib.sha1(frame.tobytes()).digest()] for frame in frames]]
-    truth = core._goal_of_code[codes]
-    return np.where(truth < 0, agent.keys, truth)
+    return task_classes(core, codes, agent.keys)
 
 
 def label_accuracy(row: dict) -> tuple[int, Counter]:

@@ -537,7 +537,7 @@ class PlannerAgent(Agent):
                 ahead = values.copy()
                 ahead[:, self.lost_states] *= lost
             backed = self.config.gamma * np.einsum("smt,gt->gsm", self._moves, ahead).max(-1)
-            if ahead is not values:  # acting from it, its own moves as they are
+            if lost is not None:  # acting from it, its own moves as they are
                 backed[:, self.lost_states] = self.config.gamma * np.einsum(
                     "smt,gt->gsm", self._moves[self.lost_states], values
                 ).max(-1)
@@ -648,8 +648,10 @@ def backtrack(
             if evidence is not None:
                 belief = belief * evidence[rows[step]][state_class]
             belief /= max(belief.sum(), 1e-300)
-            posterior = belief if occupancy is None else belief * occupancy
-            read = posterior @ collapse / max(posterior.sum(), 1e-300)
+            read = belief @ collapse
+            if occupancy is not None:
+                weighed = belief * occupancy
+                read = weighed @ collapse / max(weighed.sum(), 1e-300)
             if read.max() < accept:
                 break
             if labels[rows[step]] < 0:

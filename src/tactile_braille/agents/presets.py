@@ -242,8 +242,8 @@ def planner_changes(task: str) -> dict[str, Any]:
     state's value (``lost_value`` 0): the generic nothing stands for every cell off the keys at once,
     and its pooled moves promised a key beside the cells off the keys at each step, so that plans went
     through it and timed out there. On the continuous alphabet too (``lost_value`` 0 on nothing's five
-    entry states; tuned on its seed 100, session 35), whose task's keys are ringed by keys that are not
-    the task's, which read as nothing: there the plans went the same way. Not on the continuous arrows,
+    entry states; tuned on its seed 100, session 35), where a key that is not the task's reads as
+    nothing too: there the plans went the same way. Not on the continuous arrows,
     where the plans seldom leave the keys (its tuning seed types as well, in 4 % more steps)."""
     kind, keys = family(task)
     changes: dict[str, Any] = {
