@@ -17,9 +17,10 @@ result.
     python benchmarks/planner_traces.py RUN_DIR --refit --labels --set backtrack_prior=False
 
 ``--set NAME=VALUE`` types with a planner setting changed from the run's (one that acts at test time,
-such as ``gamma``, ``free_repeats`` or ``repeat_penalty``; the learnt reader and graph are the run's);
-with ``--refit`` the graph and the labels are refitted from the run's last replay first, so that a
-graph setting (``backoff``, ``graph_prior``) acts too (the reader is the run's).
+such as ``gamma``, ``free_repeats``, ``repeat_penalty`` or ``press_accept``; the learnt reader and
+graph are the run's); with ``--refit`` the graph and the labels are refitted from the run's last
+replay first, so that a graph setting (``backoff``, ``graph_prior``) acts too (the reader is the
+run's). ``--locator`` scores a ``locate`` run's metric key map against the taps' poses.
 """
 
 from __future__ import annotations
@@ -35,15 +36,17 @@ import numpy as np
 import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.agents.planner import MOVES, PRESS, PlannerAgent, reckon_offsets
+from tactile_braille.agents.planner import MOVES, PRESS, PlannerAgent, continuous_actions, reckon_offsets
 from tactile_braille.agents.report import load_run
 from tactile_braille.agents.run import CHECKPOINT_FILE
 from tactile_braille.agents.training import make_replay
 from tactile_braille.envs.registry import task_of
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 
-ACTION_NAMES = "UDLR"[:MOVES] + "P" + "udlr"[:MOVES]
-"""Each planner action's letter: the moves, PRESS, then each move that ends in a press (lower case)."""
+ACTION_NAMES = "UDLR"[:MOVES] + "P" + "udlr"[:MOVES] + "m*"
+"""Each planner action's letter: the moves, PRESS, each move that ends in a press (lower case), then
+(with ``locate``) a move the map aimed (``m``) and one that ends in a press (``*``)."""
+MAP_MOVE, MAP_PRESS = len(ACTION_NAMES) - 2, len(ACTION_NAMES) - 1
 
 
 def state_name(agent: PlannerAgent, state: int, names: list[str]) -> str:
@@ -76,10 +79,19 @@ class Recorder:
             self.episodes.append([])
             self.steps.append([])
         action = self.agent.policy_action(observation, step, explore, rng, deterministic)
-        self.episodes[-1].append(int(self.agent.action_indices(np.asarray(action)[None])[0]))
         read = self.agent.read(observation["observation"][None])[0].argmax()
-        believed = int(self.agent._beliefs[explore].argmax())
-        self.steps[-1].append(f"{self.names[read]}>{state_name(self.agent, believed, self.names)}")
+        try:
+            index = int(self.agent.action_indices(np.asarray(action)[None])[0])
+        except ValueError:  # a step the map aimed (locate)
+            index = None
+        where = self.agent._where.get(explore)
+        if index is None or isinstance(where, np.ndarray):
+            index = MAP_PRESS if np.asarray(action)[2] >= 1.0 - 1e-6 else MAP_MOVE
+            self.steps[-1].append(f"{self.names[read]}>({where[0]:+.2f},{where[1]:+.2f})")
+        else:
+            believed = int(self.agent._beliefs[explore].argmax())
+            self.steps[-1].append(f"{self.names[read]}>{state_name(self.agent, believed, self.names)}")
+        self.episodes[-1].append(index)
         return action
 
 
@@ -91,6 +103,11 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
         raise SystemExit(f"{run_dir} is a {config.algo} run: this script reads planner runs")
     agent.config = dataclasses.replace(agent.config, **(settings or {}))
     agent._plan()  # the values again, for a planning setting (gamma, planning_sweeps)
+    if agent.continuous is not None:  # its actions again, for press_accept (a move that ends in a press)
+        c = agent.config
+        agent.continuous = continuous_actions(
+            c.move, c.sense_depth, c.move_press or c.press_accept is not None
+        )
     if refit:
         buffer = make_replay(config, env)
         state = torch.load(Path(run_dir) / CHECKPOINT_FILE, weights_only=False, map_location="cpu")
@@ -116,7 +133,14 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
     for goal, pressed, actions in zip(goals, typed, recorder.episodes, strict=True):
         if pressed != goal:
             last = actions[-1]
-            misses["time limit" if last < PRESS else ("press" if last == PRESS else "move and press")] += 1
+            if last == MAP_PRESS:
+                misses["map press"] += 1
+            else:
+                misses[
+                    "time limit"
+                    if last < PRESS or last == MAP_MOVE
+                    else ("press" if last == PRESS else "move and press")
+                ] += 1
     return {
         "run": run_dir, "name": Path(run_dir).name, "agent": agent, "env": env, "accuracy": result.accuracy,
         "steps": result.total_steps, "misses": misses,
@@ -159,6 +183,32 @@ def reader_accuracy(
     names = [*env.unwrapped.goal_keys, "-"]
     confusions = Counter((names[t], names[r]) for t, r in zip(truth, read, strict=True) if t != r)
     return float(right.mean()), float(right[on_keys].mean()), float(right[~on_keys].mean()), confusions
+
+
+@torch.no_grad()
+def locator_error(
+    agent: PlannerAgent, env, taps: int = 2000, seed: int = 0
+) -> tuple[int, float, float, float]:
+    """The map's error (``locate``) on random taps in a continuous task's workspace at its sensing
+    depth that the reader reads as a key with ``locate_accept``: their number, and the median, 90th
+    percentile and largest distance in mm between where the map places each and where it was (the
+    pose: a measurement's knowledge), after the one shift that best aligns the map (its origin is
+    its own)."""
+    core = env.unwrapped._core
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(core._workspace_low, core._workspace_high, (taps, 2))
+    sense = 5 + 3 * agent.config.sense_depth + core._depth_shift_mm
+    frames, _ = core.backend.continuous_taps(*(xy + core._frame_origin).T, np.full(taps, sense), rng)
+    frames = frames.reshape(taps, 1, 100, 100)
+    reading = agent.read(frames)
+    keys, sure = reading.argmax(-1), reading.max(-1) >= agent.config.locate_accept
+    sure &= keys < agent.keys
+    agent.locator.eval()
+    placed = agent.locator(torch.as_tensor(frames[sure]), torch.as_tensor(keys[sure])).double().numpy()
+    placed *= core.task.max_move_mm
+    residual = placed - xy[sure]
+    distance = np.hypot(*(residual - np.median(residual, 0)).T)
+    return int(sure.sum()), *(float(v) for v in np.percentile(distance, [50, 90, 100]))
 
 
 def label_truth(row: dict) -> np.ndarray:
@@ -211,6 +261,9 @@ def main() -> None:
     parser.add_argument(
         "--labels", action="store_true", help="with --refit: score its labels against the taps' keys"
     )
+    parser.add_argument(
+        "--locator", action="store_true", help="locate runs: the map's error in mm on random taps"
+    )
     args = parser.parse_args()
     if args.labels and not args.refit:
         parser.error("--labels scores a refit's labels: add --refit")
@@ -220,13 +273,16 @@ def main() -> None:
         settings[name] = ast.literal_eval(value)
     rows = [traces(run, settings, args.refit) for run in args.runs]
     width = max(len(row["name"]) for row in rows) + 2
-    print("run".ljust(width), "accuracy  steps  misses (press / move and press / time limit)  actions")
+    print(
+        "run".ljust(width),
+        "accuracy  steps  misses (press / move and press / time limit / map's press)  actions",
+    )
     for row in rows:
         misses = row["misses"]
         actions = " ".join(f"{a}:{row['actions'][a]}" for a in ACTION_NAMES if row["actions"][a])
         print(row["name"].ljust(width), f"{row['accuracy']:.3f}  {row['steps']:5d}  "
               f"{misses['press']:3d} / {misses['move and press']:3d} / {misses['time limit']:3d}"
-              f"{'':29s}{actions}")  # fmt: skip
+              f" / {misses['map press']:3d}{'':32s}{actions}")  # fmt: skip
     print("\nsteps a key typed right took: steps: keys")
     for row in rows:
         counts = row["right_steps"]
@@ -237,6 +293,13 @@ def main() -> None:
             every, on, off, confusions = reader_accuracy(row["agent"], row["env"])
             common = ", ".join(f"{t} read {r}: {n}" for (t, r), n in confusions.most_common(5))
             print(row["name"].ljust(width), f"{every:.3f}  {on:.3f}  {off:.3f}   {common}")
+    if args.locator:
+        print(
+            "\nthe map on 2,000 random taps: taps read as a key, error in mm (median, 90th percentile, most)"
+        )
+        for row in rows:
+            placed, median, p90, most = locator_error(row["agent"], row["env"])
+            print(row["name"].ljust(width), f"{placed:5d}  {median:5.2f}  {p90:5.2f}  {most:5.2f}")
     if args.labels:
         print("\nthe refit's labels: labelled frames, wrong labels, then the commonest (truth labelled as)")
         for row in rows:

@@ -446,6 +446,39 @@ def test_a_move_and_press_types_a_known_neighbour_in_one_step(env_datasets, disc
         )
 
 
+def test_a_test_move_ends_in_a_press_where_the_graph_is_sure_it_reaches_the_goal(env_datasets, discrete_env):
+    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
+    config = PlannerConfig(press_accept=0.9, epsilon_start=0.0, epsilon_end=0.0)  # no random actions
+    agent = PlannerAgent(env.observation_space, env.action_space, config)
+    states = len(agent.state_class)
+    moves = np.full((states, MOVES, states), 1.0 / states)
+    moves[0, 1] = np.eye(states)[1]  # DOWN from key 0 surely reaches key 1
+    moves[0, 2] = 0.5 * np.eye(states)[1] + 0.5 * np.eye(states)[2]  # LEFT reaches it half the time
+    given_graph(agent, moves)
+    agent.read = lambda frames, batch_size=512: np.eye(agent.classes)[[0]]  # the sensor on key 0
+    observation, _ = env.reset(seed=0)
+    observation = {**observation, "desired_goal": np.eye(agent.keys, dtype=np.float32)[1]}
+    rng = np.random.default_rng(0)
+    typed = agent.policy_action(observation, 0, explore=False, rng=rng)
+    np.testing.assert_array_equal(typed, [*agent.continuous[1, :2], 1.0])  # DOWN, pressed at its end
+    assert agent.action_indices(typed[None]).tolist() == [PRESS + 1 + 1]  # read back as DOWN and a press
+    trained = agent.policy_action(observation, 10**6, explore=True, rng=rng)
+    np.testing.assert_array_equal(trained, agent.continuous[1])  # training moves and presses apart
+    agent.config = dataclasses.replace(agent.config, press_accept=None)
+    np.testing.assert_array_equal(
+        agent.policy_action(observation, 0, explore=False, rng=rng), agent.continuous[1]
+    )
+    agent.config = dataclasses.replace(agent.config, press_accept=0.9)
+    agent._moves[0, 1] = agent._moves[0, 2]  # now DOWN too reaches the goal only half the time
+    assert agent.policy_action(observation, 0, explore=False, rng=rng)[2] == agent.config.sense_depth
+    with pytest.raises(ValueError, match="press_accept ends a continuous task's moves"):
+        PlannerAgent(
+            discrete_env.observation_space, discrete_env.action_space, PlannerConfig(press_accept=0.9)
+        )
+    with pytest.raises(ValueError, match="press_accept is a probability"):
+        PlannerConfig(press_accept=1.5)
+
+
 def test_a_move_and_press_labels_the_frame_it_reached_and_backtracks_through_its_move(env_datasets):
     # Backtracking: an episode of one move and press (DOWN, onto key 1) from key 0.
     classes = state_classes(2)

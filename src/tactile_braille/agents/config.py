@@ -425,6 +425,23 @@ class PlannerConfig:
             every cell off the keys at once, and its pooled moves promise each of the keys beside them
             at every step (a lottery drawn again at each move), so a plan through it looks shorter
             than it is. None: its value as it is.
+        press_accept: on the continuous tasks, a test episode's move (and typing's) ends in a press,
+            in the same step, where the graph gives the goal key at least this probability after it
+            (a key one move away is typed in one step, not a move and a press). Training episodes
+            move and press apart, as before. None: never.
+        locate: on the continuous tasks, a metric key map (:mod:`~tactile_braille.agents.locator`):
+            test episodes (and typing) aim each step from where the map places the sensor at the
+            goal's press points, with a press in the step that reaches one; the key graph acts until
+            a frame is read as a key with ``locate_accept``, and again after a press that pressed
+            nothing. Training episodes act with the graph alone (the map learns from its moves).
+        locate_accept: the reader's probability that a frame shows a key for the map to place it.
+        locate_margin: the least distance (the actions' units: 1 is the task's largest move) a press
+            point aimed at keeps from the nearest press of anything else.
+        locate_span: the most transitions a pair of frames the map is fitted on spans.
+        locate_learning_rate: Adam's step size for the map.
+        locate_ready: the map acts only once this share of the replay's presses of the task's keys lie
+            nearer another press with the same outcome than any press with another (where the map
+            places them; checked each epoch): before, it does not yet tell the keys apart.
     """
 
     gamma: float = 0.9
@@ -458,10 +475,31 @@ class PlannerConfig:
     backtrack_prior: bool = False
     reckon: int = 0
     lost_value: float | None = None
+    press_accept: float | None = None
+    locate: bool = False
+    locate_accept: float = 0.9
+    locate_margin: float = 0.15
+    locate_span: int = 3
+    locate_learning_rate: float = 3e-3
+    locate_ready: float = 0.95
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
         problems = []
+        if self.press_accept is not None and not 0.0 < self.press_accept <= 1.0:
+            problems.append(f"press_accept is a probability in (0, 1], got {self.press_accept}")
+        if not 0.0 < self.locate_accept <= 1.0:
+            problems.append(f"locate_accept is a probability in (0, 1], got {self.locate_accept}")
+        if not 0.0 <= self.locate_ready <= 1.0 or self.locate_learning_rate <= 0:
+            problems.append(
+                f"locate_ready is a share in [0, 1] and locate_learning_rate positive, got "
+                f"{self.locate_ready}, {self.locate_learning_rate}"
+            )
+        if self.locate_margin < 0 or self.locate_span < 1:
+            problems.append(
+                f"locate_margin must not be negative and locate_span must be at least 1, got "
+                f"{self.locate_margin}, {self.locate_span}"
+            )
         if min(self.refit_every, self.refit_passes, self.planning_sweeps) < 1:
             problems.append("refit_every, refit_passes and planning_sweeps must be at least 1")
         if self.free_repeats is not None and self.free_repeats < 0:

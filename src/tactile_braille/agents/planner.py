@@ -66,6 +66,15 @@ from torch.nn import functional as F
 
 from tactile_braille.agents.common import Agent, spaces_sizes
 from tactile_braille.agents.config import PlannerConfig
+from tactile_braille.agents.locator import (
+    KeyLocator,
+    frame_pairs,
+    key_targets,
+    locate_action,
+    locator_loss,
+    press_points,
+    press_separation,
+)  # fmt: skip
 from tactile_braille.envs.tasks import DISCRETE_ACTIONS
 from tactile_braille.supervised.fit import adam
 
@@ -277,13 +286,18 @@ class PlannerAgent(Agent):
         self.config = config or PlannerConfig()
         if discrete and self.config.move_press:
             raise ValueError("move_press is for the continuous tasks: a discrete task has five actions")
+        if discrete and self.config.locate:
+            raise ValueError("locate maps a continuous task's moves: a discrete task moves a key at a time")
         if observation_space["observation"].shape != (100, 100, 1):
             raise ValueError(
                 f"the planner reads single 100x100 tactile images, got {observation_space['observation']}"
             )
         config = self.config
+        if discrete and config.press_accept is not None:
+            raise ValueError("press_accept ends a continuous task's moves in a press: a discrete move cannot")
+        with_presses = config.move_press or config.press_accept is not None  # their rows, to read them back
         self.continuous = (
-            None if discrete else continuous_actions(config.move, config.sense_depth, config.move_press)
+            None if discrete else continuous_actions(config.move, config.sense_depth, with_presses)
         )
         self.actions = len(DISCRETE_ACTIONS) + MOVES * config.move_press
         self.keys, _ = spaces_sizes(observation_space)
@@ -306,6 +320,21 @@ class PlannerAgent(Agent):
         self.refits = 0
         self._beliefs: dict[bool, np.ndarray] = {}  # the belief of each stream's episode (train, test)
         self._taken: dict[bool, np.ndarray] = {}  # the actions taken from each believed state in it
+        self.locator = None
+        if config.locate:  # the metric key map (tactile_braille.agents.locator), in the snapshots too
+            self.locator = KeyLocator(self.keys, config.hidden).to(self.device)
+            self.locator_optimiser = adam(
+                self.locator.parameters(), config.locate_learning_rate, config.adam_eps
+            )
+            self.policy_parts = (*type(self).policy_parts, "locator")
+            self.checkpointed = (*type(self).checkpointed, "locator", "locator_optimiser")
+        self.pairs = np.zeros((0, 2), np.int64)  # the map's pairs of frame slots, their keys, their moves
+        self.pair_keys = np.zeros((0, 2), np.int64)
+        self.pair_moves = np.zeros((0, 2), np.float32)
+        self._press_data: tuple | None = None  # the last refit's presses, for the map's targets
+        # Where the map has the sensor in a test episode: None before it places it, False after a press
+        # it aimed pressed nothing (the graph acts then).
+        self._where: dict[bool, np.ndarray | bool | None] = {}
         self._plan()
 
     # ------------------------------------------------------------ acting
@@ -383,7 +412,12 @@ class PlannerAgent(Agent):
         deterministic: bool = False,
     ) -> int | np.ndarray:
         """Epsilon-greedy on the QMDP values exploring, else with ``test_epsilon``; 0 if ``deterministic``.
-        On a continuous task the chosen action as its :func:`continuous_actions` row."""
+        On a continuous task the chosen action as its :func:`continuous_actions` row; with ``locate``,
+        a test episode's steps from where the map places the sensor (:meth:`located_action`)."""
+        if self.locator is not None and not explore:
+            located = self.located_action(observation)
+            if located is not None:
+                return located
         belief = self.belief(observation, stream=explore)
         state = int(belief.argmax())
         taken = self._taken[explore][state]
@@ -397,7 +431,45 @@ class PlannerAgent(Agent):
             values = self.action_values(belief, int(np.argmax(observation["desired_goal"])))
             action = int((values - self.config.repeat_penalty * taken).argmax())
         self._taken[explore][state, action] += 1
+        if not explore and action < PRESS and self.config.press_accept is not None:
+            goal = self.state_class == int(np.argmax(observation["desired_goal"]))
+            if belief @ self._moves[:, action, :] @ goal >= self.config.press_accept:
+                return self._as_action(PRESS + 1 + action)  # the move, and a press at its end
         return self._as_action(action)
+
+    @torch.no_grad()
+    def located_action(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
+        """With ``locate``, a test step aimed by the map (:func:`~tactile_braille.agents.locator.
+        locate_action`), or None where the key graph acts: until a frame is read as a key, and for the
+        rest of an episode once a press the map aimed pressed nothing (the graph then starts again from
+        the frame, as at an episode's start)."""
+        previous = np.asarray(observation["previous_action"])
+        if not previous.any():  # a new episode: the map acts once a frame is read as a key
+            self._where[False] = None
+        elif isinstance(self._where.get(False), np.ndarray) and previous[2] >= 1.0 - 1e-6:  # pressed nothing
+            self._where[False] = False  # the graph for the rest of the episode, from this frame on
+            self._beliefs[False] = None
+            return None
+        where = self._where.get(False)
+        if where is False or float(self.locator.separation) < self.config.locate_ready:
+            return None
+        reading = self.read(observation["observation"][None])[0]
+        key = int(reading.argmax())
+        if key < self.keys and reading[key] >= self.config.locate_accept:
+            frame = torch.as_tensor(np.moveaxis(observation["observation"], -1, 0)[None], device=self.device)
+            self.locator.eval()
+            where = self.locator(frame, torch.tensor([key], device=self.device))[0].double().cpu().numpy()
+        if where is None:
+            return None
+        goal = int(np.argmax(observation["desired_goal"]))
+        targets = self.locator.targets[goal].double().cpu().numpy()
+        chosen = locate_action(where, targets, self.locator.safety[goal].double().cpu().numpy(),
+                               self.config.locate_margin)  # fmt: skip
+        if chosen is None:
+            return None
+        move, ends = chosen
+        self._where[False] = where + move
+        return np.array([*move, 1.0 if ends else self.config.sense_depth], dtype=np.float32)
 
     def random_action(self, space: gym.Space, rng: np.random.Generator) -> int | np.ndarray:
         """One of its five actions at random (the start steps'), as its exploration draws them."""
@@ -446,10 +518,16 @@ class PlannerAgent(Agent):
         if len(self.label_frames) == 0:
             return {"frames": np.zeros((0, 1, 100, 100), np.uint8), "classes": np.zeros(0, np.int64)}
         index = rng.integers(len(self.label_frames), size=min(batch_size, len(self.label_frames)))
-        return {
+        batch = {
             "frames": buffer.store.observations(self.label_frames[index]),
             "classes": self.label_classes[index],
         }
+        if self.locator is not None and len(self.pairs):
+            index = rng.integers(len(self.pairs), size=min(batch_size, len(self.pairs)))
+            frames = buffer.store.observations(self.pairs[index].ravel())
+            batch.update(pair_first=frames[0::2], pair_second=frames[1::2], pair_keys=self.pair_keys[index],
+                         pair_moves=self.pair_moves[index])  # fmt: skip
+        return batch
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One gradient step of the reader's cross-entropy on labelled frames."""
@@ -462,7 +540,21 @@ class PlannerAgent(Agent):
         self.optimiser.zero_grad(set_to_none=True)
         loss.backward()
         self.optimiser.step()
-        return {"losses/reader_loss": loss.item(), "charts/labelled_frames": float(len(self.label_frames))}
+        metrics = {"losses/reader_loss": loss.item(), "charts/labelled_frames": float(len(self.label_frames))}
+        if self.locator is not None:  # every epoch's row has the map's columns (NaN: no pairs yet)
+            metrics.update(
+                {"losses/locator_loss": float("nan"), "charts/located_pairs": float(len(self.pairs))}
+            )
+        if "pair_first" in t:  # the map's step on pairs of frames and the moves between them
+            self.locator.train()
+            with self.autocast():
+                located = locator_loss(self.locator, t["pair_first"], t["pair_second"], t["pair_keys"],
+                                       t["pair_moves"])  # fmt: skip
+            self.locator_optimiser.zero_grad(set_to_none=True)
+            located.backward()
+            self.locator_optimiser.step()
+            metrics["losses/locator_loss"] = located.item()
+        return metrics
 
     def refit(self, buffer) -> None:
         """Refit the graph, the labels and the values from the replay's transitions."""
@@ -477,6 +569,7 @@ class PlannerAgent(Agent):
         frames, rows = np.unique(np.concatenate([this, after]), return_inverse=True)
         row_this, row_after = rows[: len(this)], rows[len(this) :]
         probabilities = self.read(buffer.store.observations(frames)).astype(np.float64)
+        reading = probabilities.copy()  # the reader's own, for the map (its labels are written over these)
 
         pressed, moved = presses(indices), indices > PRESS
         anchors = np.full(len(frames), -1)
@@ -518,7 +611,48 @@ class PlannerAgent(Agent):
         self.graph.prior.copy_(torch.as_tensor(prior))
         labelled = np.flatnonzero(labels >= 0)
         self.label_frames, self.label_classes = frames[labelled], labels[labelled]
+        if self.locator is not None:
+            read = np.where(reading.max(-1) >= self.config.locate_accept, reading.argmax(-1), -1)
+            known = np.where(labels >= 0, labels, read)  # a label, else what the reader reads surely
+            known[row_after[pressed]] = -1  # a press's frame is a deep tap: the map reads light ones
+            self._pair(buffer, frames, np.stack([row_this, row_after], 1), known, indices, firsts, pressed,
+                       achieved)  # fmt: skip
         self._plan()
+
+    def _pair(self, buffer, frames, rows, labels, indices, firsts, pressed, achieved) -> None:
+        """The map's pairs of frames (:func:`~tactile_braille.agents.locator.frame_pairs`) from each
+        frame's class (``labels``: the refit's label, else what the reader reads with ``locate_accept``,
+        else -1), and its presses, for the targets :meth:`end_epoch` places."""
+        keys = np.where(labels < self.keys, labels, -1)
+        deltas = self.continuous[indices, :2].astype(np.float64)
+        first, second, moves = frame_pairs(rows, keys, deltas, firsts, self.config.locate_span)
+        self.pairs = np.stack([frames[first], frames[second]], 1)
+        self.pair_keys, self.pair_moves = np.stack([keys[first], keys[second]], 1), moves
+        outcomes = np.where((achieved >= 0) & (achieved < self.keys), achieved, -1)
+        self._press_data = (buffer, frames, rows, keys, deltas, firsts, pressed, outcomes)
+
+    @torch.no_grad()
+    def end_epoch(self) -> None:
+        """With ``locate``, the map's targets from the last refit's presses
+        (:func:`~tactile_braille.agents.locator.press_points`, :func:`~tactile_braille.agents.locator.
+        key_targets`), placed by the map as it now is."""
+        if self.locator is None or self._press_data is None:
+            return
+        buffer, frames, rows, keys, deltas, firsts, pressed, outcomes = self._press_data
+        located = keys >= 0
+        positions = np.zeros((len(frames), 2))
+        self.locator.eval()
+        slots = np.flatnonzero(located)
+        for i in range(0, len(slots), 512):
+            chunk = slots[i : i + 512]
+            images = torch.as_tensor(buffer.store.observations(frames[chunk]), device=self.device)
+            key = torch.as_tensor(keys[chunk], device=self.device)
+            positions[chunk] = self.locator(images, key).double().cpu().numpy()
+        points, kinds = press_points(positions, located, rows, deltas, firsts, pressed, outcomes)
+        targets, safety = key_targets(points, kinds, self.keys)
+        self.locator.targets.copy_(torch.as_tensor(targets))
+        self.locator.safety.copy_(torch.as_tensor(safety))
+        self.locator.separation.fill_(press_separation(points, kinds))
 
     def _plan(self) -> None:
         """Value iteration per goal on the graph: ``values[g, s]``, pressing worth 1 on the goal key."""

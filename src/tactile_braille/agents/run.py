@@ -36,7 +36,8 @@ PROGRESS_FIELDS = (
     "epoch", "env_steps", "updates", "train/episodes", "train/episodic_return", "test/episodic_return",
     "test/episode_length", "test/success_rate", "losses/q_loss", "losses/q_values", "losses/qf_loss",
     "losses/actor_loss", "losses/alpha", "losses/entropy", "losses/inverse_loss", "losses/pressed_key_loss",
-    "losses/reader_loss", "charts/labelled_frames", "charts/SPS", "time_s",
+    "losses/reader_loss", "charts/labelled_frames", "losses/locator_loss", "charts/located_pairs",
+    "charts/SPS", "time_s",
 )  # fmt: skip
 
 
