@@ -51,7 +51,10 @@ which its soft counts and its belief filter carry as they are. With
 ``move_press`` it has four more actions there: each move with a press at its
 end, worth the belief that the move ends on the goal key (a known neighbour is
 typed in one step, not a move and a press); the graph counts them as their
-moves, and the key they press labels the frame they reach.
+moves, and the key they press labels the frame they reach. ``press_accept`` ends a test episode's move
+in a press where the graph is that sure the move reaches the goal, and ``locate`` aims test episodes'
+steps with a metric key map (:mod:`~tactile_braille.agents.locator`); neither is in a preset (their
+measurements: docs/agents.md, session 36).
 """
 
 from __future__ import annotations
@@ -74,7 +77,7 @@ from tactile_braille.agents.locator import (
     locator_loss,
     press_points,
     press_separation,
-)  # fmt: skip
+)
 from tactile_braille.envs.tasks import DISCRETE_ACTIONS
 from tactile_braille.supervised.fit import adam
 
@@ -530,7 +533,8 @@ class PlannerAgent(Agent):
         return batch
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
-        """One gradient step of the reader's cross-entropy on labelled frames."""
+        """One gradient step of the reader's cross-entropy on labelled frames, and with ``locate`` one of
+        the map's on its pairs (:func:`~tactile_braille.agents.locator.locator_loss`)."""
         if len(batch["classes"]) == 0:
             return {}
         t = self.tensors(batch)
