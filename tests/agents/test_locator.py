@@ -12,17 +12,7 @@ from test_planner import random_replay
 
 from agents_helpers import CONTINUOUS_TASK
 from tactile_braille.agents import PlannerConfig, TrainConfig
-from tactile_braille.agents.locator import (
-    TARGETS,
-    KeyLocator,
-    frame_pairs,
-    key_targets,
-    locate_action,
-    locator_loss,
-    press_points,
-    press_separation,
-    steps_to,
-)
+from tactile_braille.agents import locator as maps
 from tactile_braille.agents.planner import PlannerAgent
 
 
@@ -32,13 +22,13 @@ def test_pairs_join_frames_of_one_episode_with_the_moves_between_them():
     deltas = np.array([[0.5, 0.0], [0.0, -0.5], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
     firsts = np.array([True, False, False, True, False])
     labels = np.array([0, 1, -1, 1, 2, 0, 0])  # frame 2 has no key: no pair touches it
-    first, second, moves = frame_pairs(rows, labels, deltas, firsts, span=3)
+    first, second, moves = maps.frame_pairs(rows, labels, deltas, firsts, span=3)
     found = {(int(a), int(b)): tuple(m) for a, b, m in zip(first, second, moves, strict=True)}
     assert found == {
         (0, 1): (0.5, 0.0), (0, 3): (0.5, -0.5), (1, 3): (0.0, -0.5),  # frame 3 after a press: no move
         (4, 5): (1.0, 0.0), (4, 6): (1.0, 1.0), (5, 6): (0.0, 1.0),
     }  # fmt: skip
-    assert len(frame_pairs(rows, labels, deltas, firsts, span=1)[0]) == 3  # one transition each
+    assert len(maps.frame_pairs(rows, labels, deltas, firsts, span=1)[0]) == 3  # one transition each
 
 
 def test_press_points_are_placed_by_the_last_placed_frame_and_the_moves_since():
@@ -49,7 +39,7 @@ def test_press_points_are_placed_by_the_last_placed_frame_and_the_moves_since():
     outcomes = np.array([-1, -1, 1, -1])
     positions = np.array([[1.0, 1.0], [9, 9], [9, 9], [9, 9], [9, 9], [9, 9]])
     located = np.array([True, False, False, False, False, False])  # frame 0 only: the rest reckoned
-    points, kinds = press_points(positions, located, rows, deltas, firsts, pressed, outcomes)
+    points, kinds = maps.press_points(positions, located, rows, deltas, firsts, pressed, outcomes)
     np.testing.assert_allclose(points, [[1.5, 1.5]])  # frame 0 and two moves; episode 2 never placed
     assert kinds.tolist() == [1]
 
@@ -57,46 +47,51 @@ def test_press_points_are_placed_by_the_last_placed_frame_and_the_moves_since():
 def test_a_key_s_targets_are_its_presses_each_as_safe_as_its_distance_to_anything_else():
     points = np.array([[0.0, 0.0], [0.3, 0.0], [0.6, 0.0], [1.0, 0.0]])
     outcomes = np.array([0, 0, 0, 1])
-    targets, safety = key_targets(points, outcomes, keys=3)
-    assert targets.shape == (3, TARGETS, 2) and safety.shape == (3, TARGETS)
+    targets, safety = maps.key_targets(points, outcomes, keys=3)
+    assert targets.shape == (3, maps.TARGETS, 2) and safety.shape == (3, maps.TARGETS)
     np.testing.assert_allclose(targets[0, :3], [[0.0, 0.0], [0.3, 0.0], [0.6, 0.0]])  # safest first
     np.testing.assert_allclose(safety[0, :3], [1.0, 0.7, 0.4])
     np.testing.assert_allclose(safety[1, 0], 0.4)
     assert np.isnan(targets[2]).all() and np.isneginf(safety[2]).all()  # key 2 was never pressed
-    crowded = key_targets(np.array([[0.0, 0.0], [0.01, 0.01], [0.5, 0.5]]), np.array([0, 0, 1]), 2)
+    crowded = maps.key_targets(np.array([[0.0, 0.0], [0.01, 0.01], [0.5, 0.5]]), np.array([0, 0, 1]), 2)
     assert np.isfinite(crowded[1][0]).sum() == 1  # two presses in one cell: the safer one kept
 
 
 def test_the_map_tells_the_keys_apart_where_each_press_s_nearest_press_had_its_outcome():
     points = np.array([[0.0, 0.0], [0.1, 0.0], [1.0, 0.0], [1.1, 0.0], [0.55, 0.0]])
-    assert press_separation(points, np.array([0, 0, 1, 1, -1])) == 1.0
-    assert press_separation(points, np.array([0, 1, 0, 1, -1])) == 0.0  # each beside the other key
-    assert press_separation(points[:1], np.array([0])) == 0.0  # one press tells nothing
+    assert maps.press_separation(points, np.array([0, 0, 1, 1, -1])) == 1.0
+    assert maps.press_separation(points, np.array([0, 1, 0, 1, -1])) == 0.0  # each beside the other key
+    assert maps.press_separation(points[:1], np.array([0])) == 0.0  # one press tells nothing
 
 
 def test_the_aim_is_the_fewest_steps_then_the_safest_and_a_step_that_reaches_it_presses():
-    assert steps_to(np.array([[0.2, -0.9], [1.5, 0.0], [0.0, 0.0], [-2.0, 2.1]])).tolist() == [1, 2, 1, 3]
+    assert maps.steps_to(np.array([[0.2, -0.9], [1.5, 0.0], [0.0, 0.0], [-2.0, 2.1]])).tolist() == [
+        1,
+        2,
+        1,
+        3,
+    ]
     targets = np.array([[0.9, 0.0], [0.5, 0.0], [2.5, 0.0], [np.nan, np.nan]])
     safety = np.array([0.2, 0.5, 0.9, -np.inf])
-    move, ends = locate_action(np.zeros(2), targets, safety, margin=0.1)
+    move, ends = maps.locate_action(np.zeros(2), targets, safety, margin=0.1)
     np.testing.assert_allclose(move, [0.5, 0.0])  # both one step away: the safer, pressed
     assert ends
-    move, ends = locate_action(np.zeros(2), targets, safety, margin=0.6)
+    move, ends = maps.locate_action(np.zeros(2), targets, safety, margin=0.6)
     np.testing.assert_allclose(move, [2.5 / 3, 0.0])  # only the third is that safe: a third of the way
     assert not ends
-    assert locate_action(np.zeros(2), targets[3:], safety[3:], 0.1) is None  # a key never pressed
+    assert maps.locate_action(np.zeros(2), targets[3:], safety[3:], 0.1) is None  # a key never pressed
 
 
 def test_the_map_fits_pairs_by_their_moves_up_to_its_origin():
     torch.manual_seed(0)
-    locator = KeyLocator(keys=2, hidden=(16,))
+    locator = maps.KeyLocator(keys=2, hidden=(16,))
     frames = torch.randint(0, 255, (4, 1, 100, 100), dtype=torch.uint8)
     first, second = frames[[0, 1, 2]], frames[[1, 2, 3]]
     keys = torch.tensor([[0, 0], [0, 1], [1, 1]])
     moves = torch.tensor([[0.3, 0.0], [0.0, 0.4], [-0.2, 0.1]])
     optimiser = torch.optim.Adam(locator.parameters(), 2e-2)
     for _ in range(150):
-        loss = locator_loss(locator, first, second, keys, moves)
+        loss = maps.locator_loss(locator, first, second, keys, moves)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
@@ -119,7 +114,7 @@ def test_a_locating_planner_fits_its_map_from_a_replay_and_types_with_it(env_dat
     agent.refit(buffer)
     for _ in range(10):
         losses = agent.update(agent.sample(buffer, 16, rng))
-    assert len(agent.pairs) > 0 and np.isfinite(losses["losses/locator_loss"])
+    assert len(agent.pairs) > 0 and np.isfinite(losses["losses/maps.locator_loss"])
     assert losses["charts/located_pairs"] == len(agent.pairs)
     agent.end_epoch()
     assert np.isfinite(agent.locator.safety.numpy()).any()  # targets placed from the replay's presses
