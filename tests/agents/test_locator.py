@@ -114,7 +114,7 @@ def test_a_locating_planner_fits_its_map_from_a_replay_and_types_with_it(env_dat
     agent.refit(buffer)
     for _ in range(10):
         losses = agent.update(agent.sample(buffer, 16, rng))
-    assert len(agent.pairs) > 0 and np.isfinite(losses["losses/maps.locator_loss"])
+    assert len(agent.pairs) > 0 and np.isfinite(losses["losses/locator_loss"])
     assert losses["charts/located_pairs"] == len(agent.pairs)
     agent.end_epoch()
     assert np.isfinite(agent.locator.safety.numpy()).any()  # targets placed from the replay's presses
