@@ -380,7 +380,7 @@ def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
     with pytest.raises(ValueError, match="reckon is a form of nothing_memory"):
         PlannerConfig(reckon=2, nothing_carry=True)
     with pytest.raises(ValueError, match="a continuous task has none"):
-        env = gym.make(CONTINUOUS_TASK)
+        env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])  # the small grid: quick
         PlannerAgent(env.observation_space, env.action_space, PlannerConfig(reckon=2))
     with pytest.raises(ValueError, match=r"Discrete\(5\) actions or the continuous tasks' Box"):
         PlannerAgent(discrete_observation_space(), gym.spaces.Box(-1.0, 1.0, (2,)))
