@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
-import hashlib
 import time
 from pathlib import Path
 
@@ -32,7 +31,7 @@ import numpy as np
 import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
-from planner_traces import locator_error
+from planner_traces import locator_error, sample_codes, stored_samples
 from tactile_braille.agents.locator import KeyLocator
 from tactile_braille.agents.planner import PlannerAgent
 from tactile_braille.agents.report import load_run
@@ -68,14 +67,9 @@ def pair_truth(env, agent: PlannerAgent, buffer) -> tuple[np.ndarray, np.ndarray
     core = env.unwrapped._core
     backend = core.backend
     poses = np.asarray(backend.dataset.poses)
-    index = {hashlib.sha1(frame.tobytes()).digest(): i for i, frame in enumerate(backend.observations)}
-    shape = backend.observations.shape[1:]
-    frames = buffer.store.observations(agent.pairs.ravel())
-    samples = np.array([index[hashlib.sha1(f.reshape(shape).tobytes()).digest()] for f in frames])
-    samples = samples.reshape(-1, 2)
+    samples = stored_samples(backend, buffer.store.observations(agent.pairs.ravel())).reshape(-1, 2)
     moves = (poses[samples[:, 1], :2] - poses[samples[:, 0], :2]) / core.task.max_move_mm
-    deep = backend.nearest_samples(poses[:, 0], poses[:, 1], np.full(len(poses), 8.0))
-    keys = core._goal_of_code[backend._grid_pressed[deep]][samples]
+    keys = core._goal_of_code[sample_codes(backend, continuous=True)][samples]
     return moves.astype(np.float32), keys, float(backend._grid_step[:2].max() / core.task.max_move_mm)
 
 

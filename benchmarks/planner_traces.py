@@ -29,6 +29,7 @@ import argparse
 import ast
 import dataclasses
 import hashlib
+import math
 from collections import Counter
 from pathlib import Path
 
@@ -203,6 +204,8 @@ def locator_error(
     reading = agent.read(frames)
     keys, sure = reading.argmax(-1), reading.max(-1) >= agent.config.locate_accept
     sure &= keys < agent.keys
+    if not sure.any():
+        return 0, math.nan, math.nan, math.nan
     agent.locator.eval()
     placed = agent.locator(torch.as_tensor(frames[sure]), torch.as_tensor(keys[sure])).double().numpy()
     placed *= core.task.max_move_mm
@@ -211,25 +214,35 @@ def locator_error(
     return int(sure.sum()), *(float(v) for v in np.percentile(distance, [50, 90, 100]))
 
 
+def stored_samples(backend, frames: np.ndarray) -> np.ndarray:
+    """The stored sample (its row of the dataset backend's observations) each of ``frames`` is, found
+    by its bytes (a measurement's knowledge, never the agent's)."""
+    index = {hashlib.sha1(frame.tobytes()).digest(): i for i, frame in enumerate(backend.observations)}
+    return np.array([index[hashlib.sha1(frame.tobytes()).digest()] for frame in frames], np.int64)
+
+
+def sample_codes(backend, continuous: bool) -> np.ndarray:
+    """The layout code of the key under each stored sample (-1: none): a discrete dataset's key, or
+    on a continuous grid what the deepest tap at the sample's place presses."""
+    if not continuous:  # the dataset's samples of each key (code + 1: row 0 is NONE)
+        code_of = np.full(len(backend.observations), -1)
+        for slot, count in enumerate(backend._counts):
+            code_of[backend._table[slot, :count]] = slot - 1
+        return code_of
+    flat = np.empty(len(backend._grid_rows), np.int64)
+    flat[backend._grid_rows] = np.arange(len(flat))  # each sample's cell of the stored grid
+    depths = backend._grid_shape[2]
+    return backend._grid_pressed[backend._grid_rows[flat // depths * depths + depths - 1]]
+
+
 def label_truth(row: dict) -> np.ndarray:
     """The class of each labelled frame of a refit (``--refit``): the key a press would press where it
     was taken (from the stored sample each frame is: a measurement's knowledge), the task's keys, then
     nothing."""
     agent, env = row["agent"], row["env"]
     core, buffer = env.unwrapped._core, row["buffer"]
-    backend = core.backend
-    if agent.continuous is None:  # the dataset's samples of each key (code + 1: row 0 is NONE)
-        code_of = np.full(len(backend.observations), -1)
-        for slot, count in enumerate(backend._counts):
-            code_of[backend._table[slot, :count]] = slot - 1
-    else:  # a sample's key: what the deepest tap at its place presses
-        flat = np.empty(len(backend._grid_rows), np.int64)
-        flat[backend._grid_rows] = np.arange(len(flat))  # each sample's cell of the stored grid
-        depths = backend._grid_shape[2]
-        code_of = backend._grid_pressed[backend._grid_rows[flat // depths * depths + depths - 1]]
-    index = {hashlib.sha1(frame.tobytes()).digest(): i for i, frame in enumerate(backend.observations)}
-    frames = buffer.store.observations(agent.label_frames)
-    codes = code_of[[index[hashlib.sha1(frame.tobytes()).digest()] for frame in frames]]
+    samples = stored_samples(core.backend, buffer.store.observations(agent.label_frames))
+    codes = sample_codes(core.backend, agent.continuous is not None)[samples]
     return task_classes(core, codes, agent.keys)
 
 

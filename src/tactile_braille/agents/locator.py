@@ -9,10 +9,11 @@ one move that ends in a press would do. The locator adds the where:
   and **an offset reader**, a small CNN that reads from a frame where on its key it was tapped (a tap
   at the same place on two keys looks nearly alike; within a key, taps 1 mm apart differ). A frame
   read as ``key`` is at ``centres[key] + offset(frame)``.
-* Both are fitted on **pairs of frames of one episode** whose classes are known (the planner's
-  labels) with the sum of the commanded moves between them (the previous actions, in the
-  observations): ``position(b) - position(a) = moves``, a Huber loss (a move that meets the
-  workspace's edge moves less than commanded). No pose is read: the map's origin is arbitrary.
+* Both are fitted on **pairs of frames of one episode** whose keys are known (the planner's labels,
+  else what its reader reads with ``locate_accept``; never a press's deep frame) with the sum of the
+  commanded moves between them (the previous actions, in the observations): ``position(b) -
+  position(a) = moves``, a Huber loss (a move that meets the workspace's edge moves less than
+  commanded). No pose is read: the map's origin is arbitrary.
 * **Press points**: where each press of the replay was made, placed by the last frame of its episode
   the map places and the moves since, and what it pressed. A key's *targets* are its own press points,
   each with its *safety*, the distance to the nearest press point that pressed anything else.
@@ -74,6 +75,7 @@ def frame_pairs(
     """
     firsts = np.asarray(firsts, bool)
     episode = np.cumsum(firsts)
+    moved = np.cumsum(np.r_[np.zeros((1, 2)), deltas], axis=0)  # the moves before each transition
     a, b, d = [], [], []
     for length in range(1, span + 1):
         if length > len(rows):
@@ -81,7 +83,6 @@ def frame_pairs(
         start = np.arange(len(rows) - length + 1)
         last = start + length - 1
         same = episode[start] == episode[last]
-        moved = np.cumsum(np.r_[np.zeros((1, 2)), deltas], axis=0)
         a.append(rows[start[same], 0])
         b.append(rows[last[same], 1])
         d.append(moved[last[same] + 1] - moved[start[same]])
