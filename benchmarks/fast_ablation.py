@@ -61,7 +61,8 @@ VARIANTS = {
     # memory of the key a cell off the keys was left from and the final press of a training episode;
     # on the continuous ones the entry states and the exploration that presses 8 times in 10; on the
     # discrete ones (session 35) the occupancy its backtracking reads with and the worthless generic
-    # nothing of its value iteration.
+    # nothing of its value iteration; on the continuous ones (session 37) the test press that waits for
+    # a frame showing the goal.
     "planner-no-filter": ("fast-tactile", {"agent": {"filter": False}}),
     "planner-no-optimism": ("fast-tactile", {"agent": {"optimism": False}}),
     "planner-no-repeat-penalty": ("fast-tactile", {"agent": {"repeat_penalty": 0.0}}),
@@ -71,6 +72,7 @@ VARIANTS = {
     "planner-uniform-exploration": ("fast-tactile", {"agent": {"explore_press": None}}),
     "planner-no-occupancy": ("fast-tactile", {"agent": {"backtrack_prior": False}}),
     "planner-no-lost-value": ("fast-tactile", {"agent": {"lost_value": None}}),
+    "planner-no-press-reading": ("fast-tactile", {"agent": {"press_reading": None}}),
 }
 __doc__ += "".join(f"\n* ``{name}``: preset {preset}, {changes or 'as it is'}" for name, (preset, changes) in
                    VARIANTS.items())  # fmt: skip

@@ -479,6 +479,42 @@ def test_a_test_move_ends_in_a_press_where_the_graph_is_sure_it_reaches_the_goal
         PlannerConfig(press_accept=1.5)
 
 
+def test_a_test_press_waits_for_a_frame_that_shows_the_goal(env_datasets):
+    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
+    entry = MOVES + 1  # a state is a class and how the sensor came onto it: class * entry + move + 1
+    key0, key0_down, key1_down = 0, 0 * entry + 1 + 1, 1 * entry + 1 + 1
+
+    def two_steps(config: PlannerConfig, explore: bool) -> tuple[PlannerAgent, np.ndarray]:
+        """From key 0 toward key 1: DOWN, then a frame that shows key 0 (the move did not leave it)."""
+        agent = PlannerAgent(env.observation_space, env.action_space, config)
+        states = len(agent.state_class)
+        moves = np.full((states, MOVES, states), 1.0 / states)
+        moves[[key0, key0_down], 1] = np.eye(states)[key1_down]  # the graph: DOWN from key 0 reaches key 1
+        given_graph(agent, moves)
+        observation, _ = env.reset(seed=0)
+        observation = {**observation, "desired_goal": np.eye(agent.keys, dtype=np.float32)[1]}
+        rng = np.random.default_rng(0)
+        agent.read = lambda frames, batch_size=512: np.eye(agent.classes)[[0]]
+        first = agent.policy_action(observation, 10**6, explore=explore, rng=rng)
+        np.testing.assert_array_equal(first, agent.continuous[1])  # DOWN
+        agent.read = lambda frames, batch_size=512: np.array([[0.98, 0.01, 0.0, 0.0, 0.01]])
+        moved = {**observation, "previous_action": first}
+        return agent, agent.policy_action(moved, 10**6, explore=explore, rng=rng)
+
+    base = PlannerConfig(entry_memory=True, epsilon_start=0.0, epsilon_end=0.0)
+    agent, action = two_steps(base, explore=False)
+    assert int(agent._beliefs[False].argmax()) == key1_down  # the filter believes the graph
+    np.testing.assert_array_equal(action, agent.continuous[PRESS])  # and presses key 0
+    waiting = dataclasses.replace(base, press_reading=0.5)
+    agent, action = two_steps(waiting, explore=False)
+    np.testing.assert_array_equal(action, agent.continuous[1])  # the frame shows key 0: DOWN again
+    assert int(agent._beliefs[False].argmax()) == key0_down  # believed from the frame, reached by DOWN
+    agent, action = two_steps(waiting, explore=True)
+    np.testing.assert_array_equal(action, agent.continuous[PRESS])  # training presses as before
+    with pytest.raises(ValueError, match="press_reading is a probability"):
+        PlannerConfig(press_reading=0.0)
+
+
 def test_a_move_and_press_labels_the_frame_it_reached_and_backtracks_through_its_move(env_datasets):
     # Backtracking: an episode of one move and press (DOWN, onto key 1) from key 0.
     classes = state_classes(2)

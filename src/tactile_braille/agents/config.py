@@ -429,6 +429,12 @@ class PlannerConfig:
             in the same step, where the graph gives the goal key at least this probability after it
             (a key one move away is typed in one step, not a move and a press). Training episodes
             move and press apart, as before. None: never.
+        press_reading: in test episodes (and typing), PRESS only where the reader gives the goal key
+            at least this probability on the frame under the sensor: a press ends the episode, and the
+            filter's belief, carried by the graph, can name the goal where the frame itself shows
+            another key (a move that did not leave its key). Where it does not, the belief starts again
+            from the frame (placed after the last move, as at an episode's start) and the plan takes
+            its best move. Training episodes press as before (a wrong press labels a frame). None: off.
         locate: on the continuous tasks, a metric key map (:mod:`~tactile_braille.agents.locator`):
             test episodes (and typing) aim each step from where the map places the sensor at the
             goal's press points, with a press in the step that reaches one; the key graph acts until
@@ -476,6 +482,7 @@ class PlannerConfig:
     reckon: int = 0
     lost_value: float | None = None
     press_accept: float | None = None
+    press_reading: float | None = None
     locate: bool = False
     locate_accept: float = 0.9
     locate_margin: float = 0.15
@@ -488,6 +495,8 @@ class PlannerConfig:
         problems = []
         if self.press_accept is not None and not 0.0 < self.press_accept <= 1.0:
             problems.append(f"press_accept is a probability in (0, 1], got {self.press_accept}")
+        if self.press_reading is not None and not 0.0 < self.press_reading <= 1.0:
+            problems.append(f"press_reading is a probability in (0, 1], got {self.press_reading}")
         if not 0.0 < self.locate_accept <= 1.0:
             problems.append(f"locate_accept is a probability in (0, 1], got {self.locate_accept}")
         if not 0.0 <= self.locate_ready <= 1.0 or self.locate_learning_rate <= 0:

@@ -54,7 +54,8 @@ typed in one step, not a move and a press); the graph counts them as their
 moves, and the key they press labels the frame they reach. ``press_accept`` ends a test episode's move
 in a press where the graph is that sure the move reaches the goal, and ``locate`` aims test episodes'
 steps with a metric key map (:mod:`~tactile_braille.agents.locator`); neither is in a preset (their
-measurements: docs/agents.md, session 36).
+measurements: docs/agents.md, session 36). ``press_reading`` refuses a test episode's press where the
+frame under the sensor, read alone, does not show the goal: the belief starts again from that frame.
 """
 
 from __future__ import annotations
@@ -322,6 +323,7 @@ class PlannerAgent(Agent):
         self.fitted_size = -1  # the replay's size at the last refit (-1: none since made or restored)
         self.refits = 0
         self._beliefs: dict[bool, np.ndarray] = {}  # the belief of each stream's episode (train, test)
+        self._readings: dict[bool, np.ndarray] = {}  # the reading of each stream's last frame
         self._taken: dict[bool, np.ndarray] = {}  # the actions taken from each believed state in it
         self.locator = None
         if config.locate:  # the metric key map (tactile_braille.agents.locator), in the snapshots too
@@ -378,6 +380,7 @@ class PlannerAgent(Agent):
             belief = self._place(reading, last, int(self.action_indices(previous[None])[0]))
         belief = belief / max(belief.sum(), 1e-300)
         self._beliefs[stream] = belief
+        self._readings[stream] = reading
         return belief
 
     def _place(self, reading: np.ndarray, before: np.ndarray | None, action: int | None) -> np.ndarray:
@@ -423,22 +426,52 @@ class PlannerAgent(Agent):
                 return located
         belief = self.belief(observation, stream=explore)
         state = int(belief.argmax())
-        taken = self._taken[explore][state]
-        if state == self.start_nothing:  # the generic nothing: free repeats, or all (a straight line out)
-            free = self.config.free_repeats
-            taken = np.zeros_like(taken) if free is None else np.maximum(taken - free, 0.0)
+        taken = self._taken_from(explore, state)
         epsilon = 0.0 if deterministic else (self.epsilon(step) if explore else self.config.test_epsilon)
         if rng.random() < epsilon:
             action = self._random_index(rng)
         else:
-            values = self.action_values(belief, int(np.argmax(observation["desired_goal"])))
+            goal = int(np.argmax(observation["desired_goal"]))
+            values = self.action_values(belief, goal)
             action = int((values - self.config.repeat_penalty * taken).argmax())
+            if action == PRESS and not explore and self._unread_goal(goal):
+                belief, state, taken = self._restart(observation)  # from the frame, and no press
+                values = self.action_values(belief, goal)
+                values[PRESS] = -np.inf
+                action = int((values - self.config.repeat_penalty * taken).argmax())
         self._taken[explore][state, action] += 1
         if not explore and action < PRESS and self.config.press_accept is not None:
             goal = self.state_class == int(np.argmax(observation["desired_goal"]))
             if belief @ self._moves[:, action, :] @ goal >= self.config.press_accept:
                 return self._as_action(PRESS + 1 + action)  # the move, and a press at its end
         return self._as_action(action)
+
+    def _unread_goal(self, goal: int) -> bool:
+        """With ``press_reading``: whether the test stream's last frame, read alone, gives the goal key
+        less than that probability (so that a press there is refused)."""
+        least = self.config.press_reading
+        return least is not None and self._readings[False][goal] < least
+
+    def _taken_from(self, stream: bool, state: int) -> np.ndarray:
+        """The counts of the actions taken from ``state`` in ``stream``'s episode that the repeat
+        penalty weighs (in the generic nothing, only those past ``free_repeats``)."""
+        taken = self._taken[stream][state]
+        if state == self.start_nothing:  # the generic nothing: free repeats, or all (a straight line out)
+            free = self.config.free_repeats
+            taken = np.zeros_like(taken) if free is None else np.maximum(taken - free, 0.0)
+        return taken
+
+    def _restart(self, observation: dict) -> tuple[np.ndarray, int, np.ndarray]:
+        """The test stream's belief started again from its last frame's reading, placed after the
+        previous action as at an episode's start (``press_reading``): the belief, its state and the
+        actions taken from that state."""
+        previous = np.asarray(observation["previous_action"])
+        action = int(self.action_indices(previous[None])[0]) if previous.any() else None
+        belief = self._place(self._readings[False], None, action)
+        belief = belief / max(belief.sum(), 1e-300)
+        self._beliefs[False] = belief
+        state = int(belief.argmax())
+        return belief, state, self._taken_from(False, state)
 
     @torch.no_grad()
     def located_action(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
