@@ -570,6 +570,8 @@ def test_a_continuous_planner_run_learns_from_its_observations_alone(env_dataset
         True,
         "stop",
     )
+    alphabet = preset_config("fast-tactile", "tactile_braille/ContinuousAlphabet-v0", "planner")
+    assert (preset.agent.press_reading, alphabet.agent.press_reading) == (0.5, None)  # the arrows' waits
     config = dataclasses.replace(
         preset, dataset=str(env_datasets[CONTINUOUS_TASK]), epochs=2, steps_per_epoch=30, threads=1,
         agent=dataclasses.replace(preset.agent, batch_size=8, refit_every=5),
