@@ -1,13 +1,14 @@
 """Where does a key-graph planner's typing go wrong, and where do its steps go?
 
-Types the paper's sequences (the paper's protocol, seed 0, as ``tactile-braille evaluate``) with the
-last checkpoint of planner runs and prints, run by run side by side: accuracy and steps, the steps a
-key took (typed right), how often each kind of action was taken (moves, presses and moves that end
-in a press), and how each miss happened: a press where the sensor stood, a move that ended in a press,
-or the time limit. With ``--reader`` it also reads the key under the sensor from random taps (at
-random cells of a discrete task's grid; anywhere in a continuous task's workspace, at the planner's
-sensing depth), and scores the reader against the key the grid says is there (on the keys and off
-them). ``--show N`` prints N missed keys' actions a run, and at each step the class read and the
+Types the paper's sequences (the paper's protocol, seed 0, as ``tactile-braille evaluate``; with
+``--typing-seeds`` other seeds too, so other start poses) with the last checkpoint of planner runs
+and prints, run by run side by side: accuracy and steps, the steps a key took (typed right), how
+often each kind of action was taken (moves, presses and moves that end in a press), and how each
+miss happened: a press where the sensor stood, a move that ended in a press, or the time limit.
+With ``--reader`` it also reads the key under the sensor from random taps (at random cells of a
+discrete task's grid; anywhere in a continuous task's workspace, at the planner's sensing depth),
+and scores the reader against the key the grid says is there (on the keys and off them).
+``--show N`` prints N missed keys' actions a run, and at each step the class read and the
 state believed (``read>believed``). ``--refit --labels`` scores the refit's labels against the key
 under each labelled frame (found from the stored sample the frame is). All three need what only a
 measurement may know (the grid's keys, the pose), never given to the agent: a diagnostic, not a
@@ -96,9 +97,13 @@ class Recorder:
         return action
 
 
-def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> dict:
+def traces(
+    run_dir: str, settings: dict | None = None, refit: bool = False, seeds: tuple[int, ...] = (0,)
+) -> dict:
     """Type the paper's sequences with the run's planner (its ``settings`` changed; with ``refit`` its
-    graph refitted from the run's last replay with them, the reader kept); what each key's episode did."""
+    graph refitted from the run's last replay with them, the reader kept), once for each typing seed in
+    ``seeds`` (its sequences' start poses); what each key's episode did, over all of them (accuracy: the
+    mean; steps: the mean total)."""
     config, env, agent = load_run(run_dir)
     if not isinstance(agent, PlannerAgent):
         raise SystemExit(f"{run_dir} is a {config.algo} run: this script reads planner runs")
@@ -124,10 +129,11 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
         buffer = None
     keys = task_of(config.task).keys
     recorder = Recorder(agent, [*env.unwrapped.goal_keys, "-"])
-    result = type_sequences(recorder, env, paper_sequences(keys), seed=0, protocol="paper")
-    goals = [g for sequence in result.sequences for g in sequence]
-    typed = [t for sequence in result.typed for t in sequence]
-    steps = [s for sequence in result.steps for s in sequence]
+    sequences = paper_sequences(keys)
+    results = [type_sequences(recorder, env, sequences, seed=seed, protocol="paper") for seed in seeds]
+    goals = [g for result in results for sequence in result.sequences for g in sequence]
+    typed = [t for result in results for sequence in result.typed for t in sequence]
+    steps = [s for result in results for sequence in result.steps for s in sequence]
     if len(recorder.episodes) != len(goals):
         raise RuntimeError(f"recorded {len(recorder.episodes)} episodes for {len(goals)} keys")
     misses = Counter()
@@ -143,8 +149,9 @@ def traces(run_dir: str, settings: dict | None = None, refit: bool = False) -> d
                     else ("press" if last == PRESS else "move and press")
                 ] += 1
     return {
-        "run": run_dir, "name": Path(run_dir).name, "agent": agent, "env": env, "accuracy": result.accuracy,
-        "steps": result.total_steps, "misses": misses,
+        "run": run_dir, "name": Path(run_dir).name, "agent": agent, "env": env,
+        "accuracy": float(np.mean([result.accuracy for result in results])),
+        "steps": round(float(np.mean([result.total_steps for result in results]))), "misses": misses,
         "right_steps": Counter(s for s, g, t in zip(steps, goals, typed, strict=True) if g == t),
         "actions": Counter(ACTION_NAMES[a] for episode in recorder.episodes for a in episode),
         "episodes": list(zip(goals, typed, recorder.episodes, recorder.steps, strict=True)), "buffer": buffer,
@@ -277,6 +284,10 @@ def main() -> None:
     parser.add_argument(
         "--locator", action="store_true", help="locate runs: the map's error in mm on random taps"
     )
+    parser.add_argument(
+        "--typing-seeds", type=int, nargs="+", default=[0], metavar="SEED",
+        help="type with each of these seeds (other sequence start poses; default 0, the evaluation's)",
+    )  # fmt: skip
     args = parser.parse_args()
     if args.labels and not args.refit:
         parser.error("--labels scores a refit's labels: add --refit")
@@ -284,7 +295,9 @@ def main() -> None:
     for setting in args.set:
         name, _, value = setting.partition("=")
         settings[name] = ast.literal_eval(value)
-    rows = [traces(run, settings, args.refit) for run in args.runs]
+    rows = [traces(run, settings, args.refit, tuple(args.typing_seeds)) for run in args.runs]
+    if len(args.typing_seeds) > 1:
+        print(f"typing seeds {args.typing_seeds}: accuracy and steps are their means, misses their sums")
     width = max(len(row["name"]) for row in rows) + 2
     print(
         "run".ljust(width),

@@ -30,16 +30,21 @@ PNG_DPI = 110
 
 
 def new_figure(
-    rows: int = 1, columns: int = 1, figsize: tuple[float, float] | None = None, **subplot_kw: Any
+    rows: int = 1,
+    columns: int = 1,
+    figsize: tuple[float, float] | None = None,
+    gridspec_kw: dict[str, Any] | None = None,
+    **subplot_kw: Any,
 ) -> tuple[Figure, np.ndarray]:
     """A figure and its ``rows x columns`` grid of axes (always a 2-D array).
 
-    ``subplot_kw`` goes to each axes (e.g. ``projection="3d"``).
+    ``gridspec_kw`` goes to the grid (e.g. ``height_ratios``), ``subplot_kw`` to each axes (e.g.
+    ``projection="3d"``).
     """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=figsize)
-    axes = fig.subplots(rows, columns, squeeze=False, subplot_kw=subplot_kw or None)
+    axes = fig.subplots(rows, columns, squeeze=False, subplot_kw=subplot_kw or None, gridspec_kw=gridspec_kw)
     return fig, axes
 
 

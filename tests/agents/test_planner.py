@@ -515,6 +515,40 @@ def test_a_test_press_waits_for_a_frame_that_shows_the_goal(env_datasets):
         PlannerConfig(press_reading=0.0)
 
 
+def test_a_test_episode_moves_before_it_presses_without_first_press(env_datasets):
+    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
+    entry = MOVES + 1  # a state is a class and how the sensor came onto it: class * entry + move + 1
+    key1_first, key1_down = 1 * entry, 1 * entry + 1 + 1
+
+    def first_step(config: PlannerConfig, explore: bool) -> tuple[PlannerAgent, np.ndarray]:
+        """An episode's first frame, read surely as the goal key 1; a move DOWN from it stays on key 1."""
+        agent = PlannerAgent(env.observation_space, env.action_space, config)
+        states = len(agent.state_class)
+        moves = np.full((states, MOVES, states), 1.0 / states)
+        moves[key1_first, 1] = np.eye(states)[key1_down]
+        given_graph(agent, moves)
+        observation, _ = env.reset(seed=0)
+        observation = {**observation, "desired_goal": np.eye(agent.keys, dtype=np.float32)[1]}
+        agent.read = lambda frames, batch_size=512: np.eye(agent.classes)[[1]]
+        return agent, agent.policy_action(observation, 10**6, explore=explore, rng=np.random.default_rng(0))
+
+    base = PlannerConfig(entry_memory=True, epsilon_start=0.0, epsilon_end=0.0)
+    agent, action = first_step(base, explore=False)
+    np.testing.assert_array_equal(action, agent.continuous[PRESS])  # pressed on the frame alone
+    moving = dataclasses.replace(base, first_press=False)
+    agent, action = first_step(moving, explore=False)
+    np.testing.assert_array_equal(action, agent.continuous[1])  # the move the graph says stays on key 1
+    assert int(agent._beliefs[False].argmax()) == key1_first  # believed from the frame, as before
+    agent, action = first_step(moving, explore=True)
+    np.testing.assert_array_equal(action, agent.continuous[PRESS])  # training presses as before
+    # After that move, the frame still read as key 1, the press is allowed again.
+    agent, first = first_step(moving, explore=False)
+    goal = np.eye(agent.keys, dtype=np.float32)[1]
+    moved = {**env.reset(seed=0)[0], "desired_goal": goal, "previous_action": first}
+    action = agent.policy_action(moved, 10**6, explore=False, rng=np.random.default_rng(0))
+    np.testing.assert_array_equal(action, agent.continuous[PRESS])
+
+
 def test_a_move_and_press_labels_the_frame_it_reached_and_backtracks_through_its_move(env_datasets):
     # Backtracking: an episode of one move and press (DOWN, onto key 1) from key 0.
     classes = state_classes(2)
@@ -571,7 +605,8 @@ def test_a_continuous_planner_run_learns_from_its_observations_alone(env_dataset
         "stop",
     )
     alphabet = preset_config("fast-tactile", "tactile_braille/ContinuousAlphabet-v0", "planner")
-    assert (preset.agent.press_reading, alphabet.agent.press_reading) == (0.5, None)  # the arrows' waits
+    assert (preset.agent.press_reading, alphabet.agent.press_reading) == (0.8, None)  # the arrows' waits
+    assert (preset.agent.first_press, alphabet.agent.first_press) == (False, True)
     config = dataclasses.replace(
         preset, dataset=str(env_datasets[CONTINUOUS_TASK]), epochs=2, steps_per_epoch=30, threads=1,
         agent=dataclasses.replace(preset.agent, batch_size=8, refit_every=5),

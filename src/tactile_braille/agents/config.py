@@ -435,6 +435,11 @@ class PlannerConfig:
             another key (a move that did not leave its key). Where it does not, the belief starts again
             from the frame (placed after the last move, as at an episode's start) and the plan takes
             its best move. Training episodes press as before (a wrong press labels a frame). None: off.
+        first_press: whether a test episode (and typing) may PRESS on its first frame. False: the first
+            frame, read alone at an unknown place, names the key the reader has seen most like it (a
+            corner of a key outside the task's reads as one of the task's); the plan moves first, and
+            the belief the graph carries from that move weighs the frames after it (a key typed again
+            right after itself costs a move away and back).
         locate: on the continuous tasks, a metric key map (:mod:`~tactile_braille.agents.locator`):
             test episodes (and typing) aim each step from where the map places the sensor at the
             goal's press points, with a press in the step that reaches one; the key graph acts until
@@ -483,6 +488,7 @@ class PlannerConfig:
     lost_value: float | None = None
     press_accept: float | None = None
     press_reading: float | None = None
+    first_press: bool = True
     locate: bool = False
     locate_accept: float = 0.9
     locate_margin: float = 0.15

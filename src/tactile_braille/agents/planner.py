@@ -55,7 +55,8 @@ moves, and the key they press labels the frame they reach. ``press_accept`` ends
 in a press where the graph is that sure the move reaches the goal, and ``locate`` aims test episodes'
 steps with a metric key map (:mod:`~tactile_braille.agents.locator`); neither is in a preset (their
 measurements: docs/agents.md, session 36). ``press_reading`` refuses a test episode's press where the
-frame under the sensor, read alone, does not show the goal: the belief starts again from that frame.
+frame under the sensor, read alone, does not show the goal: the belief starts again from that frame;
+without ``first_press`` a test episode does not press on its first frame, and moves first.
 """
 
 from __future__ import annotations
@@ -434,7 +435,8 @@ class PlannerAgent(Agent):
             goal = int(np.argmax(observation["desired_goal"]))
             values = self.action_values(belief, goal)
             action = int((values - self.config.repeat_penalty * taken).argmax())
-            if action == PRESS and not explore and self._unread_goal(goal):
+            test_press = action == PRESS and not explore
+            if test_press and (self._unread_goal(goal) or self._first_frame(observation)):
                 belief, state, taken = self._restart(observation)  # from the frame, and no press
                 values = self.action_values(belief, goal)
                 values[PRESS] = -np.inf
@@ -451,6 +453,10 @@ class PlannerAgent(Agent):
         less than that probability (so that a press there is refused)."""
         least = self.config.press_reading
         return least is not None and self._readings[False][goal] < least
+
+    def _first_frame(self, observation: dict) -> bool:
+        """Without ``first_press``: whether ``observation`` is its episode's first frame (no action yet)."""
+        return not self.config.first_press and not np.asarray(observation["previous_action"]).any()
 
     def _taken_from(self, stream: bool, state: int) -> np.ndarray:
         """The counts of the actions taken from ``state`` in ``stream``'s episode that the repeat

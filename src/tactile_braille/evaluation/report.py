@@ -704,8 +704,15 @@ def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str 
     originals = original_curves()
     columns = min(len(tasks), 2)
     rows = int(np.ceil(len(tasks) / columns))
-    fig, axes = new_figure(rows, columns, figsize=(7.0 * columns, 4.4 * rows))
-    for ax, (task, members) in zip(axes.ravel(), tasks.items(), strict=False):
+    # Each panel's legend in a row of its own below it, tall enough for the row's longest legend (the
+    # curves stay uncovered): entries are the groups and up to two logged runs.
+    entries = [len(members) + 2 for members in tasks.values()]
+    legend_rows = [max(entries[r * columns : (r + 1) * columns]) * 0.13 + 0.1 for r in range(rows)]
+    heights = [h for legend in legend_rows for h in (3.6, legend)]
+    fig, grid = new_figure(2 * rows, columns, figsize=(7.0 * columns, sum(heights) + 0.8),
+                           gridspec_kw={"height_ratios": heights})  # fmt: skip
+    axes, legends = grid[0::2], grid[1::2]
+    for ax, legend, (task, members) in zip(axes.ravel(), legends.ravel(), tasks.items(), strict=False):
         longest = max(len(r.returns) for _, _, records in members for r in records)
         for index, (algo, variant, records) in enumerate(members):
             epochs, curves = seed_curves(records)
@@ -730,8 +737,9 @@ def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str 
         ax.set_xlabel("epoch (250 steps)")
         ax.set_ylabel(f"test return, mean of {compared_seeds(task)}+ seeds")
         ax.set_ylim(-0.05, 1.05)
-        ax.legend(fontsize=6.5, loc="lower right")
-    for ax in axes.ravel()[len(tasks) :]:
+        legend.axis("off")
+        legend.legend(*ax.get_legend_handles_labels(), fontsize=6.5, loc="upper left", frameon=False)
+    for ax in (*axes.ravel()[len(tasks) :], *legends.ravel()[len(tasks) :]):
         ax.axis("off")
     fig.tight_layout()
     return save_figure(fig, path)
