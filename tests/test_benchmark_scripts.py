@@ -163,6 +163,14 @@ def test_planner_traces_scores_the_reader_and_the_refit_labels_against_the_taps_
     where = {frame: i for i, frame in enumerate(agent.label_frames)}
     assert len(slots) > 0
     np.testing.assert_array_equal([truth[where[f]] for f in frames], buffer.achieved[slots])
+    # Other typing seeds: every key typed from each seed's starts, as that seed alone types them; the
+    # figures are the seeds' means.
+    both = script.traces(str(run), seeds=(0, 1))
+    second = script.traces(str(run), seeds=(1,))
+    assert len(both["episodes"]) == 2 * len(second["episodes"]) == 2 * 96
+    assert both["episodes"][96:] == second["episodes"]
+    first = np.mean([goal == typed for goal, typed, *_ in both["episodes"][:96]])
+    assert both["accuracy"] == pytest.approx((first + second["accuracy"]) / 2)
 
 
 def test_locator_fit_finds_the_moves_the_workspace_s_edge_cut_short(env_datasets, tmp_path, monkeypatch):
