@@ -3,8 +3,8 @@
 Types the paper's sequences (the paper's protocol, seed 0, as ``tactile-braille evaluate``; with
 ``--typing-seeds`` other seeds too, so other start poses) with the last checkpoint of planner runs
 and prints, run by run side by side: accuracy and steps, the steps a key took (typed right), how
-often each kind of action was taken (moves, presses and moves that end in a press), and how each
-miss happened: a press where the sensor stood, a move that ended in a press, or the time limit.
+often each kind of action was taken (moves and presses), and how each miss happened: a press where
+the sensor stood, or the time limit.
 With ``--reader`` it also reads the key under the sensor from random taps (at random cells of a
 discrete task's grid; anywhere in a continuous task's workspace, at the planner's sensing depth),
 and scores the reader against the key the grid says is there (on the keys and off them).
@@ -18,10 +18,9 @@ result.
     python benchmarks/planner_traces.py RUN_DIR --refit --labels --set backtrack_prior=False
 
 ``--set NAME=VALUE`` types with a planner setting changed from the run's (one that acts at test time,
-such as ``gamma``, ``free_repeats``, ``repeat_penalty`` or ``press_accept``; the learnt reader and
-graph are the run's); with ``--refit`` the graph and the labels are refitted from the run's last
-replay first, so that a graph setting (``backoff``, ``graph_prior``) acts too (the reader is the
-run's). ``--locator`` scores a ``locate`` run's metric key map against the taps' poses.
+such as ``gamma``, ``free_repeats`` or ``repeat_penalty``; the learnt reader and graph are the
+run's); with ``--refit`` the graph and the labels are refitted from the run's last replay first, so
+that a graph setting (``backoff``, ``graph_prior``) acts too (the reader is the run's).
 """
 
 from __future__ import annotations
@@ -30,7 +29,6 @@ import argparse
 import ast
 import dataclasses
 import hashlib
-import math
 from collections import Counter
 from pathlib import Path
 
@@ -38,33 +36,25 @@ import numpy as np
 import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.agents.planner import MOVES, PRESS, PlannerAgent, continuous_actions, reckon_offsets
+from tactile_braille.agents.planner import MOVES, PRESS, PlannerAgent, continuous_actions
 from tactile_braille.agents.report import load_run
 from tactile_braille.agents.run import CHECKPOINT_FILE
 from tactile_braille.agents.training import make_replay
 from tactile_braille.envs.registry import task_of
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 
-ACTION_NAMES = "UDLR"[:MOVES] + "P" + "udlr"[:MOVES] + "m*"
-"""Each planner action's letter: the moves, PRESS, each move that ends in a press (lower case), then
-(with ``locate``) a move the map aimed (``m``) and one that ends in a press (``*``)."""
-MAP_MOVE, MAP_PRESS = len(ACTION_NAMES) - 2, len(ACTION_NAMES) - 1
+ACTION_NAMES = "UDLR"[:MOVES] + "P"
+"""Each planner action's letter: the moves, then PRESS."""
 
 
 def state_name(agent: PlannerAgent, state: int, names: list[str]) -> str:
     """A planning state's name: its class, then how it was reached: with ``entry_memory`` ``.`` (no
-    move) or the move's letter; with ``reckon``, off the keys, the key it left (``*``: the episode's
-    start) and the offset from it; else, off the keys, the key and the move it left by (``-`` alone: the
+    move) or the move's letter; else, off the keys, the key and the move it left by (``-`` alone: the
     generic nothing)."""
     if agent.config.entry_memory:
         return names[agent.state_class[state]] + ".UDLR"[state % (MOVES + 1)]
     if state <= agent.keys:
         return names[agent.state_class[state]]
-    if agent.config.reckon:  # the key (``*``: the start) and the offset from it, in rows and columns
-        offsets = reckon_offsets(agent.config.reckon)
-        anchor, offset = divmod(state - agent.keys - 1, len(offsets))
-        row, column = offsets[offset]
-        return f"-{names[anchor] if anchor < agent.keys else '*'}{row:+d}{column:+d}"
     key, move = divmod(state - agent.keys - 1, MOVES)
     return f"-{names[key]}{'UDLR'[move]}"
 
@@ -82,17 +72,9 @@ class Recorder:
             self.steps.append([])
         action = self.agent.policy_action(observation, step, explore, rng, deterministic)
         read = self.agent.read(observation["observation"][None])[0].argmax()
-        try:
-            index = int(self.agent.action_indices(np.asarray(action)[None])[0])
-        except ValueError:  # a step the map aimed (locate)
-            index = None
-        where = self.agent._where.get(explore)
-        if index is None or isinstance(where, np.ndarray):
-            index = MAP_PRESS if np.asarray(action)[2] >= 1.0 - 1e-6 else MAP_MOVE
-            self.steps[-1].append(f"{self.names[read]}>({where[0]:+.2f},{where[1]:+.2f})")
-        else:
-            believed = int(self.agent._beliefs[explore].argmax())
-            self.steps[-1].append(f"{self.names[read]}>{state_name(self.agent, believed, self.names)}")
+        index = int(self.agent.action_indices(np.asarray(action)[None])[0])
+        believed = int(self.agent._beliefs[explore].argmax())
+        self.steps[-1].append(f"{self.names[read]}>{state_name(self.agent, believed, self.names)}")
         self.episodes[-1].append(index)
         return action
 
@@ -109,11 +91,8 @@ def traces(
         raise SystemExit(f"{run_dir} is a {config.algo} run: this script reads planner runs")
     agent.config = dataclasses.replace(agent.config, **(settings or {}))
     agent._plan()  # the values again, for a planning setting (gamma, planning_sweeps)
-    if agent.continuous is not None:  # its actions again, for press_accept (a move that ends in a press)
-        c = agent.config
-        agent.continuous = continuous_actions(
-            c.move, c.sense_depth, c.move_press or c.press_accept is not None
-        )
+    if agent.continuous is not None:  # its actions again, for a setting of them (move, sense_depth)
+        agent.continuous = continuous_actions(agent.config.move, agent.config.sense_depth)
     if refit:
         buffer = make_replay(config, env)
         state = torch.load(Path(run_dir) / CHECKPOINT_FILE, weights_only=False, map_location="cpu")
@@ -139,15 +118,7 @@ def traces(
     misses = Counter()
     for goal, pressed, actions in zip(goals, typed, recorder.episodes, strict=True):
         if pressed != goal:
-            last = actions[-1]
-            if last == MAP_PRESS:
-                misses["map press"] += 1
-            else:
-                misses[
-                    "time limit"
-                    if last < PRESS or last == MAP_MOVE
-                    else ("press" if last == PRESS else "move and press")
-                ] += 1
+            misses["time limit" if actions[-1] < PRESS else "press"] += 1
     return {
         "run": run_dir, "name": Path(run_dir).name, "agent": agent, "env": env,
         "accuracy": float(np.mean([result.accuracy for result in results])),
@@ -191,34 +162,6 @@ def reader_accuracy(
     names = [*env.unwrapped.goal_keys, "-"]
     confusions = Counter((names[t], names[r]) for t, r in zip(truth, read, strict=True) if t != r)
     return float(right.mean()), float(right[on_keys].mean()), float(right[~on_keys].mean()), confusions
-
-
-@torch.no_grad()
-def locator_error(
-    agent: PlannerAgent, env, taps: int = 2000, seed: int = 0
-) -> tuple[int, float, float, float]:
-    """The map's error (``locate``) on random taps in a continuous task's workspace at its sensing
-    depth that the reader reads as a key with ``locate_accept``: their number, and the median, 90th
-    percentile and largest distance in mm between where the map places each and where it was (the
-    pose: a measurement's knowledge), after the one shift that best aligns the map (its origin is
-    its own)."""
-    core = env.unwrapped._core
-    rng = np.random.default_rng(seed)
-    xy = rng.uniform(core._workspace_low, core._workspace_high, (taps, 2))
-    sense = 5 + 3 * agent.config.sense_depth + core._depth_shift_mm
-    frames, _ = core.backend.continuous_taps(*(xy + core._frame_origin).T, np.full(taps, sense), rng)
-    frames = frames.reshape(taps, 1, 100, 100)
-    reading = agent.read(frames)
-    keys, sure = reading.argmax(-1), reading.max(-1) >= agent.config.locate_accept
-    sure &= keys < agent.keys
-    if not sure.any():
-        return 0, math.nan, math.nan, math.nan
-    agent.locator.eval()
-    placed = agent.locator(torch.as_tensor(frames[sure]), torch.as_tensor(keys[sure])).double().numpy()
-    placed *= core.task.max_move_mm
-    residual = placed - xy[sure]
-    distance = np.hypot(*(residual - np.median(residual, 0)).T)
-    return int(sure.sum()), *(float(v) for v in np.percentile(distance, [50, 90, 100]))
 
 
 def stored_samples(backend, frames: np.ndarray) -> np.ndarray:
@@ -282,9 +225,6 @@ def main() -> None:
         "--labels", action="store_true", help="with --refit: score its labels against the taps' keys"
     )
     parser.add_argument(
-        "--locator", action="store_true", help="locate runs: the map's error in mm on random taps"
-    )
-    parser.add_argument(
         "--typing-seeds", type=int, nargs="+", default=[0], metavar="SEED",
         help="type with each of these seeds (other sequence start poses; default 0, the evaluation's)",
     )  # fmt: skip
@@ -301,14 +241,13 @@ def main() -> None:
     width = max(len(row["name"]) for row in rows) + 2
     print(
         "run".ljust(width),
-        "accuracy  steps  misses (press / move and press / time limit / map's press)  actions",
+        "accuracy  steps  misses (press / time limit)  actions",
     )
     for row in rows:
         misses = row["misses"]
         actions = " ".join(f"{a}:{row['actions'][a]}" for a in ACTION_NAMES if row["actions"][a])
         print(row["name"].ljust(width), f"{row['accuracy']:.3f}  {row['steps']:5d}  "
-              f"{misses['press']:3d} / {misses['move and press']:3d} / {misses['time limit']:3d}"
-              f" / {misses['map press']:3d}{'':32s}{actions}")  # fmt: skip
+              f"{misses['press']:3d} / {misses['time limit']:3d}{'':23s}{actions}")  # fmt: skip
     print("\nsteps a key typed right took: steps: keys")
     for row in rows:
         counts = row["right_steps"]
@@ -319,13 +258,6 @@ def main() -> None:
             every, on, off, confusions = reader_accuracy(row["agent"], row["env"])
             common = ", ".join(f"{t} read {r}: {n}" for (t, r), n in confusions.most_common(5))
             print(row["name"].ljust(width), f"{every:.3f}  {on:.3f}  {off:.3f}   {common}")
-    if args.locator:
-        print(
-            "\nthe map on 2,000 random taps: taps read as a key, error in mm (median, 90th percentile, most)"
-        )
-        for row in rows:
-            placed, median, p90, most = locator_error(row["agent"], row["env"])
-            print(row["name"].ljust(width), f"{placed:5d}  {median:5.2f}  {p90:5.2f}  {most:5.2f}")
     if args.labels:
         print("\nthe refit's labels: labelled frames, wrong labels, then the commonest (truth labelled as)")
         for row in rows:

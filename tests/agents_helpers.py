@@ -9,7 +9,6 @@ import io
 import torch
 
 from tactile_braille.agents import (
-    AGENTS,
     DiscreteSACAgent,
     DiscreteSACConfig,
     DQNAgent,
@@ -20,6 +19,7 @@ from tactile_braille.agents import (
     TD3Config,
     TrainConfig,
 )
+from tactile_braille.agents.registry import agent_spec
 
 # ``tactile_braille.agents`` re-exports the function ``train``, which shadows the submodule of the
 # same name as an attribute of the package: go through the module registry for the module itself.
@@ -58,7 +58,7 @@ def read_progress_csv(run_dir) -> list[dict]:
 
 
 def touch_config(env_datasets, algo: str = "dqn", **changes) -> TrainConfig:
-    task = CONTINUOUS_TASK if AGENTS[algo].continuous else DISCRETE_TASK
+    task = CONTINUOUS_TASK if agent_spec(algo).acts_in(continuous=True) else DISCRETE_TASK
     settings = {
         "task": task,
         "algo": algo,
@@ -67,7 +67,7 @@ def touch_config(env_datasets, algo: str = "dqn", **changes) -> TrainConfig:
         "start_steps": 12,
         "threads": 1,
         "dataset": str(env_datasets[task]),
-        "agent": AGENTS[algo].config(hidden=(16,), batch_size=8),
+        "agent": agent_spec(algo).config(hidden=(16,), batch_size=8),
         "evaluation": {"test_episodes": 1, "snapshots": 1},
         "replay": {"capacity": 200},
         "touch": {"enabled": True, "epochs": 2},

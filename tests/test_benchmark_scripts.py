@@ -171,29 +171,3 @@ def test_planner_traces_scores_the_reader_and_the_refit_labels_against_the_taps_
     assert both["episodes"][96:] == second["episodes"]
     first = np.mean([goal == typed for goal, typed, *_ in both["episodes"][:96]])
     assert both["accuracy"] == pytest.approx((first + second["accuracy"]) / 2)
-
-
-def test_locator_fit_finds_the_moves_the_workspace_s_edge_cut_short(env_datasets, tmp_path, monkeypatch):
-    from tactile_braille.agents import PlannerConfig
-
-    monkeypatch.syspath_prepend(str(BENCHMARKS))  # it imports planner_traces beside it
-    script = _load("locator_fit")
-    task = "tactile_braille/ContinuousArrows-v0"
-    config = TrainConfig(task=task, algo="planner", epochs=1, steps_per_epoch=80, start_steps=0, threads=1,
-                         dataset=str(env_datasets[task]), replay={"relabel": "all"},
-                         agent=PlannerConfig(batch_size=8, refit_every=10, explore_press=0.3,
-                                             locate_accept=0.3, learning_rate=3e-3),
-                         evaluation={"test_episodes": 1})  # fmt: skip
-    run = train(config, run_dir=tmp_path / "planner", progress=False)
-    env, agent, buffer = script.refitted(str(run), {"locate_span": 1})  # pairs of one move each
-    assert agent.config.locate and agent.config.locate_span == 1 and len(agent.pairs) > 0
-    moves, keys, spacing = script.pair_truth(env, agent, buffer)
-    assert spacing == pytest.approx(0.4)  # the small grid's 4 mm, of the arrows' 10 mm moves
-    assert moves.shape == agent.pair_moves.shape and keys.shape == agent.pair_keys.shape
-    assert np.all((keys >= -1) & (keys < agent.keys))
-    # A commanded move is the true one (to within the grid's rounding), or one the edge cut short:
-    # never longer than commanded, never the other way.
-    assert np.all(np.abs(moves) <= np.abs(agent.pair_moves) + spacing + 1e-6)
-    assert np.all(np.sign(moves) * np.sign(agent.pair_moves) >= 0)
-    placed, median, p90, most = script.fit(env, agent, buffer, updates=3, learning_rate=1e-3)
-    assert placed >= 0 and (placed == 0 or 0.0 <= median <= p90 <= most)

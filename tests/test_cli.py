@@ -70,7 +70,7 @@ def test_cli_train_uses_the_released_preset_and_the_options(env_datasets, tmp_pa
     code = cli.main([
         "train", "ContinuousArrows-v0", "td3", "--preset", "released", "--epochs", "1",
         "--test-episodes", "1", "--threads", "1", "--run-dir", str(run), "--quiet", "--precision", "bf16",
-        "--updates-per-step", "3", "--checkpoint-every", "1", "--shared-encoder",
+        "--updates-per-step", "3", "--checkpoint-every", "1",
     ])  # fmt: skip
     assert code == 0
     assert f"run folder: {run}" in capsys.readouterr().out
@@ -79,7 +79,6 @@ def test_cli_train_uses_the_released_preset_and_the_options(env_datasets, tmp_pa
     data = json.loads((run / "config.json").read_text())
     assert data["preset"] == "released"
     assert data["agent"]["learning_rate"] == 7.5e-5 and data["update_every"] == 100
-    assert data["agent"]["shared_encoder"] is True
     assert (data["epochs"], data["evaluation"]["test_episodes"], data["threads"]) == (1, 1, 1)
     assert (data["precision"], data["updates_per_step"], data["checkpoint_every"]) == ("bf16", 3, 1)
     assert len(read_progress(run)) == 1
@@ -90,8 +89,8 @@ def test_cli_train_uses_the_released_preset_and_the_options(env_datasets, tmp_pa
     ("argv", "message"),
     [
         (
-            ["train", "DiscreteArrows-v0", "dqn", "--shared-encoder"],
-            "--agent.shared-encoder is not a setting of dqn",
+            ["train", "DiscreteArrows-v0", "dqn", "--agent.critic-pose"],
+            "--agent.critic-pose is not a setting of dqn",
         ),
         (["train", "Piano-v0", "dqn"], "Piano-v0"),
         (["train", "DiscreteArrowsX-v0", "dqn"], "unknown task"),

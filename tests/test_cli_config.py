@@ -10,7 +10,8 @@ from typing import Literal
 
 import pytest
 
-from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, GROUPS, TrainConfig, flatten
+from tactile_braille.agents.config import GROUPS, TrainConfig, flatten
+from tactile_braille.agents.registry import agent_names, agent_spec
 from tactile_braille.cli import _train_config, build_parser, main
 from tactile_braille.cli_config import POSITIONAL, RECORD_ONLY
 
@@ -22,7 +23,7 @@ def _settings(algo: str) -> dict[str, tuple[type, object]]:
     """dotted name -> (annotation, default) of every setting a run of ``algo`` has."""
     found = {}
     for cls, prefix in ((TrainConfig, ""), *((group, f"{name}.") for name, group in GROUPS.items()),
-                        (AGENT_CONFIGS[algo], "agent.")):  # fmt: skip
+                        (agent_spec(algo).config, "agent.")):  # fmt: skip
         hints = typing.get_type_hints(cls)
         for spec in dataclasses.fields(cls):
             if spec.name in ("agent", *GROUPS) and cls is TrainConfig:
@@ -50,7 +51,7 @@ def _other_value(hint, default):
     return "cuda:1", ["cuda:1"]  # the one free string besides the dataset path, checked by the config
 
 
-@pytest.mark.parametrize("algo", list(AGENT_CONFIGS))
+@pytest.mark.parametrize("algo", agent_names())
 def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
     argv, wanted = ["train", TASKS[algo], algo], {}
     for name, (hint, default) in _settings(algo).items():
@@ -69,7 +70,7 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = "render", ["render"]
         if name == "frame_noise":
             value, words = (1.0, 2.0), ["1.0", "2.0"]
-        if name == "edges" and algo not in CONTINUOUS_ALGORITHMS:  # the continuous tasks' (test_config)
+        if name == "edges" and algo not in ("sac", "td3"):  # the continuous tasks' (test_config)
             value, words = "stop", ["stop"]
         if name == "key_grid" and algo in ("sac", "td3"):  # the discrete tasks' (test_config)
             value, words = "rig", ["rig"]
@@ -89,10 +90,6 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = 0, ["0"]
         if name == "touch.goal_positions":  # given as its default: all-goals updates refuse goal positions
             value, words = False, None
-        if name == "agent.nothing_carry":  # given as its default: entry_memory replaces it (test_planner)
-            value, words = False, None
-        if name == "agent.reckon":  # given as its default: entry_memory replaces it (test_planner)
-            value, words = 0, ["0"]
         flag = "--" + name.replace("_", "-")
         argv += [flag, *words] if words is not None else [flag if value else "--no-" + flag[2:]]
         wanted[name] = list(value) if isinstance(value, tuple) else value

@@ -10,7 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from tactile_braille._io import LockedError
-from tactile_braille.agents.config import ALGORITHMS, BACKENDS, PRECISIONS
+from tactile_braille.agents.config import BACKENDS, PRECISIONS
+from tactile_braille.agents.registry import agent_names
 from tactile_braille.agents.presets import PRESETS as TRAINING_PRESETS
 from tactile_braille.gallery import GALLERY_DEPTH_MM
 from tactile_braille.rigs.base import RigError
@@ -673,7 +674,7 @@ def _add_train_command(commands) -> None:
         "overrides the preset's value (docs/agents.md lists them).",
     )  # fmt: skip
     trainer.add_argument("task", nargs="?", help="environment id, e.g. DiscreteArrows-v0")
-    trainer.add_argument("algo", nargs="?", choices=ALGORITHMS, help="default dqn")
+    trainer.add_argument("algo", nargs="?", choices=agent_names(), help="default dqn")
     trainer.add_argument(
         "--preset", choices=TRAINING_PRESETS,
         help="the paper's hyperparameters (default), the released code's, or ours (fast)",
@@ -808,7 +809,7 @@ def _add_sweep_command(commands) -> None:
     sweeper.add_argument(
         "--tasks", nargs="+", required=True, help="e.g. DiscreteArrows-v0 DiscreteAlphabet-v0"
     )
-    sweeper.add_argument("--algos", nargs="+", required=True, choices=ALGORITHMS)
+    sweeper.add_argument("--algos", nargs="+", required=True, choices=agent_names())
     sweeper.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     sweeper.add_argument("--preset", choices=TRAINING_PRESETS, default="paper")
     sweeper.add_argument("--backend", choices=[b for b in BACKENDS if b != "rig"], default=None)

@@ -6,8 +6,8 @@ groups becomes an option: ``--steps-per-epoch 500``, ``--replay.relabel all``,
 ``--touch.refit-every none``. Types, accepted values and help come from the
 dataclasses' annotations and docstrings, so the command line cannot drift from
 the settings. An option given overrides the preset; one not given leaves it.
-The ``agent`` options are the union of the four algorithms' hyperparameters;
-one the chosen algorithm lacks is refused by the config.
+The ``agent`` options are the union of the registered agents' hyperparameters
+(:mod:`~tactile_braille.agents.registry`); one the chosen agent lacks is refused.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ import types
 import typing
 from typing import Any, Literal, Union
 
-from tactile_braille.agents.config import AGENT_CONFIGS, GROUPS, TrainConfig
+from tactile_braille.agents.config import GROUPS, TrainConfig
+from tactile_braille.agents.registry import agent_names, agent_spec
 
 PREFIX = "setting:"
 """``argparse`` destinations of generated options start with this, then the dotted setting name."""
@@ -28,10 +29,7 @@ POSITIONAL = ("task", "algo")
 """Settings given as positional arguments, not options."""
 RECORD_ONLY = ("preset",)
 """Settings a command-line user does not set (``--preset`` chooses the preset and records it)."""
-ALIASES = {
-    "evaluation.test_episodes": ("--test-episodes",),
-    "agent.shared_encoder": ("--shared-encoder",),
-}
+ALIASES = {"evaluation.test_episodes": ("--test-episodes",)}
 """Older option names kept working (``--no-her`` is :data:`ALIASES`' boolean twin, below)."""
 
 
@@ -62,7 +60,7 @@ def add_config_options(parser: argparse.ArgumentParser, skip: tuple[str, ...] = 
             _add_option(group, f"{group_name}.{spec.name}", hints[spec.name], docs.get(spec.name, ""))
     group = parser.add_argument_group("agent settings (the algorithm's hyperparameters)")
     for name, (hint, doc, owners) in _agent_fields().items():
-        takes = "all algorithms" if len(owners) == len(AGENT_CONFIGS) else ", ".join(owners)
+        takes = "all algorithms" if len(owners) == len(agent_names()) else ", ".join(owners)
         _add_option(group, f"agent.{name}", hint, f"{doc} [{takes}]")
     parser.add_argument(
         "--no-her", dest=PREFIX + "replay.her", action="store_false", default=argparse.SUPPRESS,
@@ -71,9 +69,10 @@ def add_config_options(parser: argparse.ArgumentParser, skip: tuple[str, ...] = 
 
 
 def _agent_fields() -> dict[str, tuple[Any, str, list[str]]]:
-    """name -> (annotation, help, algorithms that take it), over the four hyperparameter classes."""
+    """name -> (annotation, help, algorithms that take it), over the registered agents' hyperparameters."""
     fields: dict[str, tuple[Any, str, list[str]]] = {}
-    for algo, cls in AGENT_CONFIGS.items():
+    for algo in agent_names():
+        cls = agent_spec(algo).config
         hints, docs = typing.get_type_hints(cls), field_docs(cls)
         for spec in dataclasses.fields(cls):
             hint, doc, owners = fields.get(spec.name, (hints[spec.name], docs.get(spec.name, ""), []))
@@ -120,10 +119,8 @@ def config_overrides(args: argparse.Namespace, algo: str) -> dict[str, Any]:
             continue
         *group, name = dest.removeprefix(PREFIX).split(".")
         value = tuple(value) if isinstance(value, list) else value
-        if group == ["agent"] and name not in {f.name for f in dataclasses.fields(AGENT_CONFIGS[algo])}:
-            owners = [
-                a for a, cls in AGENT_CONFIGS.items() if name in {f.name for f in dataclasses.fields(cls)}
-            ]
+        if group == ["agent"] and name not in _field_names(algo):
+            owners = [other for other in agent_names() if name in _field_names(other)]
             raise ValueError(
                 f"--agent.{name.replace('_', '-')} is not a setting of {algo} (only of {', '.join(owners)})"
             )
@@ -132,3 +129,8 @@ def config_overrides(args: argparse.Namespace, algo: str) -> dict[str, Any]:
         else:
             changes[name] = value
     return changes
+
+
+def _field_names(algo: str) -> set[str]:
+    """The names of agent ``algo``'s hyperparameters."""
+    return {spec.name for spec in dataclasses.fields(agent_spec(algo).config)}

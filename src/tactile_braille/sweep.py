@@ -40,7 +40,8 @@ from pathlib import Path
 from typing import Any
 
 from tactile_braille._io import atomic_path
-from tactile_braille.agents.config import AGENT_CONFIGS, acts_in, differences
+from tactile_braille.agents.config import differences
+from tactile_braille.agents.registry import agent_spec
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.run import MACHINE_SETTINGS, read_config, read_progress, setting_differences
 from tactile_braille.agents.training import train
@@ -107,10 +108,9 @@ def plan(
     trials = []
     for task in tasks:
         for algo in algos:
-            if algo not in AGENT_CONFIGS:
-                raise ValueError(f"unknown algorithm {algo!r}; choose from {tuple(AGENT_CONFIGS)}")
+            agent = agent_spec(algo)  # raises for an unknown name, listing the registered ones
             spec = task_of(Trial(task, algo, 0).env_id)
-            if spec is not None and not acts_in(algo, spec.continuous):
+            if spec is not None and not agent.acts_in(spec.continuous):
                 continue
             changes = dict(overrides)
             for name, value in settings.get(algo, {}).items():  # a group's settings join the group's

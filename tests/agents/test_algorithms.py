@@ -1,4 +1,4 @@
-"""The agents (agents/dqn.py, sac.py, sac_discrete.py, td3.py, common.py): shared encoders, TD3's delay,
+"""The agents (agents/dqn.py, sac.py, sac_discrete.py, td3.py, common.py): the actor's encoder, TD3's delay,
 checkpoints and policy snapshots, spaces and precision, bf16, the temperature, asymmetric critics.
 
 Small and fast: tiny dense layers (the paper's encoder is kept), batches of a
@@ -23,7 +23,8 @@ from torch.nn import functional as F
 
 from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK, HIDDEN, same_weights, through_file
 from feature_agents import ACTIONS, FEATURES, GOALS, PREVIOUS, batch, make
-from tactile_braille.agents import AGENTS, common
+from tactile_braille.agents import common
+from tactile_braille.agents.registry import agent_spec
 from tactile_braille.agents.common import POSE_SIZE
 
 ACTOR_CRITICS = ("sac_discrete", "sac", "td3")
@@ -106,68 +107,16 @@ def same_tensors(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool
     return a.keys() == b.keys() and all(torch.equal(a[name], b[name]) for name in a)
 
 
-# ---------------------------------------------------------------- shared encoder
+# ---------------------------------------------------------------- the actor's encoder
 def actor_outputs_sum(actor, inputs) -> torch.Tensor:
     outputs = actor(*inputs)
     outputs = outputs if isinstance(outputs, tuple) else (outputs,)
     return sum((o.float() * torch.linspace(0.5, 1.5, o.numel()).view_as(o)).sum() for o in outputs)
 
 
-def actor_deterministic_output(actor, inputs) -> torch.Tensor:
-    """SAC's squashed mean, discrete SAC's probabilities, TD3's action."""
-    outputs = actor(*inputs)
-    if not isinstance(outputs, tuple):
-        return outputs
-    return outputs[2] if len(outputs) == 3 else outputs[0]
-
-
 @pytest.mark.parametrize("algo", ACTOR_CRITICS)
-def test_shared_encoder_belongs_to_the_first_critic_only(algo, tasks):
-    agent = build(algo, tasks, shared_encoder=True)
-    encoder = agent.critics[0].trunk.encoder
-    encoder_ids = {id(p) for p in encoder.parameters()}
-    encoder_pointers = {p.data_ptr() for p in encoder.parameters()}
-    assert not hasattr(agent.actor.trunk, "encoder")
-    assert encoder_ids.isdisjoint(id(p) for p in agent.actor.parameters())
-    assert encoder_ids.isdisjoint(
-        id(p) for group in agent.actor_optimiser.param_groups for p in group["params"]
-    )
-    assert encoder_ids <= {id(p) for group in agent.critic_optimiser.param_groups for p in group["params"]}
-    actor_state = agent.actor.state_dict()
-    assert not any("encoder" in name for name in actor_state)
-    assert encoder_pointers.isdisjoint(value.data_ptr() for value in actor_state.values())
-    if algo == "td3":
-        assert not any("encoder" in name for name in agent.actor_target.state_dict())
-
-    batch = make_batch(algo, tasks)
-    inputs = state_inputs(agent, batch)
-    # The actor reads the critic's encoder: changing it changes the actor's output.
-    with torch.no_grad():
-        before = actor_deterministic_output(agent.actor, inputs)
-        saved = snapshot(encoder)
-        encoder.layers[0].weight.mul_(3.0)
-        after = actor_deterministic_output(agent.actor, inputs)
-        encoder.load_state_dict(saved)
-        assert torch.equal(before, actor_deterministic_output(agent.actor, inputs))
-    assert not torch.allclose(before, after, rtol=0, atol=1e-6)
-
-    # The actor's loss gives the encoder no gradient, but its own layers get one.
-    agent.critics.zero_grad(set_to_none=True)
-    agent.actor.zero_grad(set_to_none=True)
-    actor_outputs_sum(agent.actor, inputs).backward()
-    assert all(p.grad is None for p in encoder.parameters())
-    dense = agent.actor.trunk.dense[0].weight
-    assert dense.grad is not None and dense.grad.abs().sum() > 0
-    agent.actor.zero_grad(set_to_none=True)
-
-    # One update trains the encoder (through the critics' loss).
-    agent.update(batch)
-    assert not same_tensors(saved, snapshot(encoder))
-
-
-@pytest.mark.parametrize("algo", ACTOR_CRITICS)
-def test_without_sharing_the_actor_has_its_own_encoder(algo, tasks):
-    agent = build(algo, tasks, shared_encoder=False)
+def test_the_actor_has_its_own_encoder(algo, tasks):
+    agent = build(algo, tasks)
     own = agent.actor.trunk.encoder
     assert own is not agent.critics[0].trunk.encoder
     assert {id(p) for p in own.parameters()} <= {id(p) for p in agent.actor.parameters()}
@@ -213,17 +162,13 @@ def test_td3_updates_the_actor_every_second_critic_update_and_checkpoints_the_co
 
 
 # ---------------------------------------------------------------- checkpoints and policy snapshots
-ROUND_TRIPS = [("dqn", False), *((algo, shared) for algo in ACTOR_CRITICS for shared in (False, True))]
-
-
-@pytest.mark.parametrize(("algo", "shared"), ROUND_TRIPS)
-def test_checkpoint_round_trip_gives_the_same_actions_and_updates(algo, shared, tasks):
-    settings = {} if algo == "dqn" else {"shared_encoder": shared}
-    agent = build(algo, tasks, seed=0, **settings)
+@pytest.mark.parametrize("algo", list(ALGOS))
+def test_checkpoint_round_trip_gives_the_same_actions_and_updates(algo, tasks):
+    agent = build(algo, tasks, seed=0)
     batch = make_batch(algo, tasks, seed=0)
     for step in range(2):
         agent.update(make_batch(algo, tasks, seed=10 + step))
-    fresh = build(algo, tasks, seed=99, **settings)
+    fresh = build(algo, tasks, seed=99)
     observations = tasks[ALGOS[algo][2]]["observations"]
 
     def actions(which):
@@ -248,7 +193,7 @@ def test_checkpoint_round_trip_gives_the_same_actions_and_updates(algo, shared, 
             assert same_tensors(snapshot(part), snapshot(getattr(fresh, name))), name
 
     # An agent that did not load the checkpoint updates differently (the comparison can fail).
-    other = build(algo, tasks, seed=99, **settings)
+    other = build(algo, tasks, seed=99)
     torch.manual_seed(5)
     assert other.update(batch) != expected
 
@@ -268,9 +213,9 @@ def test_load_state_dict_names_a_missing_part(algo, tasks):
 def test_policy_snapshots_act_like_the_agent(algo, env_datasets):
     task = CONTINUOUS_TASK if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
     env = gym.make(task, dataset=env_datasets[task])
-    config = AGENTS[algo].config(hidden=(32,))
-    agent = AGENTS[algo].agent(env.observation_space, env.action_space, config)
-    fresh = AGENTS[algo].agent(env.observation_space, env.action_space, config)
+    config = agent_spec(algo).config(hidden=(32,))
+    agent = agent_spec(algo).agent_class(env.observation_space, env.action_space, config)
+    fresh = agent_spec(algo).agent_class(env.observation_space, env.action_space, config)
     snapshot = agent.policy_state_dict()
     assert set(snapshot) == set(type(agent).policy_parts)  # no optimisers, no targets
     fresh.load_policy_state_dict(snapshot)
@@ -379,15 +324,14 @@ def test_native_bf16_reads_the_processor_flags_without_onednn_s_check(monkeypatc
 @pytest.mark.parametrize("algo", ["sac", "sac_discrete"])
 def test_initial_temperature_is_a_hyperparameter(algo, env_datasets):
     from tactile_braille.agents.presets import preset_config
-    from tactile_braille.agents.training import AGENTS
 
     task = "tactile_braille/ContinuousArrows-v0" if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
     env = gym.make(task, dataset=env_datasets[task])
-    algorithm = AGENTS[algo]
-    agent = algorithm.agent(env.observation_space, env.action_space, algorithm.config(initial_alpha=0.05))
+    algorithm = agent_spec(algo)
+    agent = algorithm.agent_class(env.observation_space, env.action_space, algorithm.config(initial_alpha=0.05))
     assert float(agent.log_alpha.detach().exp()) == pytest.approx(0.05)
     assert (
-        float(algorithm.agent(env.observation_space, env.action_space).log_alpha.detach().exp()) == 1.0
+        float(algorithm.agent_class(env.observation_space, env.action_space).log_alpha.detach().exp()) == 1.0
     )  # paper
     with pytest.raises(ValueError, match="initial_alpha must be positive"):
         algorithm.config(initial_alpha=0.0)
@@ -617,27 +561,6 @@ def test_continuous_agents_build_the_released_codes_networks_where_asked(algo, t
     assert all(np.isfinite(value) for value in losses.values())
 
 
-def test_an_inverse_dynamics_loss_trains_the_q_networks_encoder_to_tell_the_action(tasks):
-    """The auxiliary head guesses each transition's action from the encoder's features of its two frames;
-    its loss is the cross-entropy of that guess and reaches the encoder, not the TD loss's value."""
-    data = make_batch("dqn", tasks)
-    plain, helped = build("dqn", tasks), build("dqn", tasks, inverse_dynamics=0.5)
-    assert same_weights(plain.q, helped.q)  # the head is made after the Q-network: the same start
-    with torch.no_grad():
-        t = helped.tensors(data)
-        current, following = helped.q.trunk.encode(torch.cat([t["images"], t["next_images"]])).chunk(2)
-        expected = F.cross_entropy(helped.inverse(current, following), t["actions"])
-    losses, plain_losses = helped.update(data), plain.update(data)
-    assert losses["losses/inverse_loss"] == pytest.approx(expected.item(), rel=1e-5)
-    assert losses["losses/q_loss"] == pytest.approx(plain_losses["losses/q_loss"], rel=1e-6)
-    assert "losses/inverse_loss" not in plain_losses
-    encoder, plain_encoder = helped.q.trunk.encoder, plain.q.trunk.encoder
-    assert not same_weights(encoder, plain_encoder)  # the head's gradient reached the encoder
-    assert "inverse" in helped.state_dict() and "inverse" not in plain.state_dict()
-    with pytest.raises(ValueError, match=r"inverse_dynamics is a loss weight: at least 0, got -1\.0"):
-        build("dqn", tasks, inverse_dynamics=-1.0)
-
-
 def test_a_pressed_key_loss_trains_the_q_networks_encoder_to_name_the_pressed_key(tasks):
     """The key head reads the frames presses were made from; its loss is the cross-entropy of that reading
     against the pressed keys, reaches the encoder and leaves the TD loss alone; without press frames
@@ -657,7 +580,7 @@ def test_a_pressed_key_loss_trains_the_q_networks_encoder_to_name_the_pressed_ke
     assert "key_head" in helped.state_dict() and "key_head" not in plain.state_dict()
     none_yet = {**data, "press_images": data["images"][:0], "press_keys": np.zeros(0, dtype=np.int64)}
     assert "losses/pressed_key_loss" not in build("dqn", tasks, pressed_key=0.5).update(none_yet)
-    with pytest.raises(ValueError, match="press_frames=True"):
+    with pytest.raises(ValueError, match="PressFrames extra"):
         build("dqn", tasks, pressed_key=0.5).update(data)
     with pytest.raises(ValueError, match=r"pressed_key is a loss weight: at least 0, got -1\.0"):
         build("dqn", tasks, pressed_key=-1.0)
@@ -692,7 +615,7 @@ def test_a_return_bound_lifts_each_target_to_at_least_its_episodes_return(tasks)
     bounds = torch.as_tensor(data["return_bounds"])
     assert torch.equal(lifted, torch.maximum(one_step, bounds))
     assert (lifted > one_step).any() and torch.equal(lifted[bounds == 0], one_step[bounds == 0])
-    with pytest.raises(ValueError, match="return_bounds=True"):
+    with pytest.raises(ValueError, match="ReturnBounds extra"):
         bounded.update(make_batch("dqn", tasks))
     with pytest.raises(
         ValueError, match="return_bound_after=10 is a number of transitions, at least 0, and needs"
@@ -831,7 +754,7 @@ def test_a_sac_all_goals_update_fits_each_goals_relabelled_targets(tasks):
 
 def test_an_all_goals_update_needs_the_pressed_keys(tasks):
     for algo in ("dqn", "sac_discrete", "sac"):
-        with pytest.raises(ValueError, match=r"'achieved'.*all_goals=True"):
+        with pytest.raises(ValueError, match=r"'achieved'.*GoalOutcomes extra"):
             build(algo, tasks, all_goals=True).update(make_batch(algo, tasks))
 
 

@@ -232,3 +232,30 @@ def test_a_config_json_from_before_adam_eps_and_the_dqn_loss_reads_what_it_was_t
             ).agent.adam_eps
             == 1e-4
         )
+
+
+REMOVED = {
+    "dqn": ({"inverse_dynamics": 0.0}, "inverse_dynamics", 0.5),
+    "sac_discrete": ({"shared_encoder": False}, "shared_encoder", True),
+    "sac": ({"shared_encoder": False}, "shared_encoder", True),
+    "td3": ({"shared_encoder": False}, "shared_encoder", True),
+    "planner": (
+        {"locate": False, "locate_accept": 0.9, "locate_margin": 0.15, "locate_span": 3,
+         "locate_learning_rate": 3e-3, "locate_ready": 0.95, "reckon": 0, "nothing_carry": False,
+         "move_press": False, "press_accept": None, "backtrack_evidence": 0.0},
+        "press_accept", 0.9,
+    ),
+}  # fmt: skip
+"""Each algorithm's removed settings as its records hold them, and one given another value."""
+
+
+@pytest.mark.parametrize("algo", list(REMOVED))
+def test_a_record_of_removed_settings_reads_only_with_the_values_the_code_still_runs(algo):
+    kept, name, other = REMOVED[algo]
+    task = CONTINUOUS_TASK if algo in ("sac", "td3") else DISCRETE_TASK
+    stored = TrainConfig(task=task, algo=algo).to_json()
+    stored["agent"] = {**stored["agent"], **kept}
+    assert TrainConfig.from_json(stored) == TrainConfig(task=task, algo=algo)
+    stored["agent"][name] = other
+    with pytest.raises(ValueError, match=rf"agent\.{name}={other!r}: this setting was removed"):
+        TrainConfig.from_json(stored)

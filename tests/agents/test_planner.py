@@ -19,16 +19,12 @@ from tactile_braille.agents.planner import (
     continuous_actions,
     episode_starts,
     graph_moves,
-    graph_moves_of,
     place,
     place_entry,
-    reckon_offsets,
-    reckon_shifts,
     state_classes,
 )
 from tactile_braille.agents.presets import preset_config
-from tactile_braille.envs.tasks import DISCRETE_ACTIONS, KEY_GRIDS
-from tactile_braille.keyboard.layout import NONE_KEY
+from tactile_braille.envs.tasks import DISCRETE_ACTIONS
 
 _STEPS = np.array([(-1, 0), (1, 0), (0, -1), (0, 1)])  # UP, DOWN, LEFT, RIGHT in (row, column)
 
@@ -132,83 +128,20 @@ def test_a_cell_off_the_keys_is_told_apart_by_the_key_and_the_move_before_it():
     assert after_up.argmax() == keys + 1 + 0 * MOVES + 2
     assert place(nothing, after_up, PRESS).argmax() == after_up.argmax()  # a press there stays
     assert place(nothing, after_up, 3).argmax() == keys  # nothing after nothing
-    assert place(nothing, after_up, 3, carry=True).argmax() == after_up.argmax()  # or still off the keys
-    assert place(nothing, start, 3, carry=True).argmax() == keys  # by the start's way
     assert np.all(state_classes(keys)[keys:] == keys)
 
 
-def test_dead_reckoning_off_the_keys_keeps_where_the_sensor_set_out_from():
-    keys, reckon = 4, 2
-    shifts, offsets = reckon_shifts(keys, reckon), reckon_offsets(reckon)
-    assert len(offsets) == 2 * reckon * (reckon + 1)
-    assert len(shifts) == len(state_classes(keys, reckon=reckon))
-    assert np.all(state_classes(keys, reckon=reckon)[keys:] == keys)
-    nothing, on = np.eye(keys + 1)[keys], place(np.eye(keys + 1)[1], None, PRESS, shifts=shifts)
-
-    def walk(state, moves):
-        for move in moves:
-            state = place(nothing, state, move, shifts=shifts)
-        return int(state.argmax())
-
-    def named(anchor, row, column):
-        return keys + 1 + anchor * len(offsets) + offsets.tolist().index([row, column])
-
-    assert walk(on, [1, 2]) == named(1, 1, -1) == walk(on, [2, 1])  # DOWN, LEFT: the sum of the moves
-    assert walk(on, [1, 2]) != walk(place(np.eye(keys + 1)[2], None, PRESS, shifts=shifts), [1, 2])
-    assert walk(on, [1, 1, 1]) == keys  # further than reckon cells: the generic nothing
-    start = place(nothing, None, PRESS, shifts=shifts)
-    assert walk(start, [0]) == named(keys, -1, 0) and walk(start, [0, 1]) == keys  # back at the start
-    after = place(nothing, on, 3, shifts=shifts)
-    assert place(nothing, after, PRESS, shifts=shifts).argmax() == after.argmax()  # a press stays
-    one = reckon_shifts(keys, 1)  # reckon 1: nothing_memory's key-and-move states, then the start's four
-    key = np.eye(keys + 1)[1]
-    for move in range(MOVES):
-        reckoned = place(nothing, place(key, None, PRESS, shifts=one), move, shifts=one)
-        assert reckoned.argmax() == place(nothing, place(key, None, PRESS), move).argmax()
-
-
-def test_on_the_alphabet_grid_each_state_reckoned_from_a_one_cell_key_is_one_cell():
-    """Random walks on the alphabet's grid that meet no edge (an edge stop is a move that did not
-    move, which reckoning counts): every state off the keys reckoned from a key of one cell is one
-    cell, two moves off the keys too (``nothing_memory`` alone forgets the key after one)."""
-    grid = np.array(KEY_GRIDS["alphabet"])
-    names = sorted({k for k in grid.ravel() if k != NONE_KEY})
-    classes = np.array([[names.index(k) if k != NONE_KEY else len(names) for k in row] for row in grid])
-    keys, reckon = len(names), 2
-    shifts, width = reckon_shifts(keys, reckon), len(reckon_offsets(reckon))
-    cells: dict[int, set] = {}
-    rng = np.random.default_rng(0)
-    for _ in range(2000):
-        cell = (int(rng.integers(4)), int(rng.integers(10)))
-        state = place(np.eye(keys + 1)[classes[cell]], None, PRESS, shifts=shifts)
-        for _ in range(12):
-            inside = [m for m in range(MOVES)
-                      if 0 <= cell[0] + _STEPS[m][0] < 4 and 0 <= cell[1] + _STEPS[m][1] < 10]  # fmt: skip
-            move = inside[rng.integers(len(inside))]
-            cell = (cell[0] + _STEPS[move][0], cell[1] + _STEPS[move][1])
-            state = place(np.eye(keys + 1)[classes[cell]], state, move, shifts=shifts)
-            named = int(state.argmax())
-            anchor = (named - keys - 1) // width
-            if named > keys and anchor < keys and names[anchor] != "SPACE":
-                cells.setdefault(named, set()).add(cell)
-    assert len(cells) >= 12 and all(len(c) == 1 for c in cells.values())
-    offsets = reckon_offsets(reckon)[(np.array(list(cells)) - keys - 1) % width]
-    assert np.abs(offsets).sum(-1).max() == 2
-
-
-def test_an_unseen_reckoned_state_backs_off_to_the_pooled_moves_as_a_translation():
-    keys, reckon = 4, 1
-    shifts = reckon_shifts(keys, reckon)
-    states = len(shifts)
+def test_an_unseen_state_off_the_keys_backs_off_to_the_pooled_moves_off_the_keys():
+    keys = 4
+    states = len(state_classes(keys))
     counts = np.zeros((states, MOVES, states))
     counts[keys + 1, 0, 0] = 3.0  # nothing UP of key 0, moved UP: key 0 (an edge stop)
-    counts[keys, 2, shifts[keys, 2]] = 1.0  # the start off the keys, moved LEFT: still off them
-    moves = graph_moves(counts, keys, prior=1e-6, backoff=1.0, shifts=shifts)
+    counts[keys, 2, keys] = 1.0  # the generic nothing, moved LEFT: still nothing
+    moves = graph_moves(counts, keys, prior=1e-6, backoff=1.0)
     unseen = keys + 1 + 3 * MOVES + 1  # nothing below key 3, never visited
-    assert moves[unseen, 0, 0] == pytest.approx(1.0, abs=1e-4)  # UP: the keys the moves off the keys reached
-    assert moves[unseen, 2, shifts[unseen, 2]] == pytest.approx(1.0, abs=1e-4)  # LEFT: one move further on
-    pooled = graph_moves(counts, keys, prior=1e-6, backoff=1.0)  # without: off the keys at the start's
-    assert pooled[unseen, 2, shifts[keys, 2]] == pytest.approx(1.0, abs=1e-4)
+    assert moves[unseen, 0, 0] == pytest.approx(1.0, abs=1e-4)  # UP: the key the moves off the keys reached
+    assert moves[unseen, 2, keys] == pytest.approx(1.0, abs=1e-4)  # LEFT: nothing, as theirs
+    np.testing.assert_allclose(moves.sum(-1), 1.0)
 
 
 def test_the_backtracked_belief_is_read_with_how_often_each_state_is_occupied():
@@ -356,7 +289,7 @@ def test_a_planner_run_learns_from_its_observations_alone_and_resumes(env_datase
     assert [row["epoch"] for row in read_progress_csv(tmp_path / "plain")] == ["0", "1", "2"]
 
 
-def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
+def test_the_planner_is_refused_what_it_cannot_read():
     with pytest.raises(ValueError, match=r"turn touch\.enabled off"):
         TrainConfig(task=DISCRETE_TASK, algo="planner", touch={"enabled": True}, track="proprio")
     with pytest.raises(ValueError, match="the planner reads the tactile images alone"):
@@ -371,17 +304,10 @@ def test_the_planner_is_refused_what_it_cannot_read(env_datasets):
         TrainConfig(task=CONTINUOUS_TASK, algo="planner", final_press=True)
     with pytest.raises(ValueError, match="move is a share"):
         PlannerConfig(move=1.5)
-    with pytest.raises(ValueError, match="that entry_memory replaces"):
-        PlannerConfig(entry_memory=True, nothing_carry=True)
     with pytest.raises(ValueError, match="explore_press is a probability"):
         PlannerConfig(explore_press=-0.1)
     with pytest.raises(ValueError, match="lost_value is a share"):
         PlannerConfig(lost_value=1.5)
-    with pytest.raises(ValueError, match="reckon is a form of nothing_memory"):
-        PlannerConfig(reckon=2, nothing_carry=True)
-    with pytest.raises(ValueError, match="a continuous task has none"):
-        env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])  # the small grid: quick
-        PlannerAgent(env.observation_space, env.action_space, PlannerConfig(reckon=2))
     with pytest.raises(ValueError, match=r"Discrete\(5\) actions or the continuous tasks' Box"):
         PlannerAgent(discrete_observation_space(), gym.spaces.Box(-1.0, 1.0, (2,)))
 
@@ -419,64 +345,6 @@ def test_on_a_continuous_task_it_acts_with_its_five_actions_and_reads_them_back(
             observation, _ = env.reset(seed=1)
     pressing = PlannerAgent(env.observation_space, env.action_space, PlannerConfig(explore_press=1.0))
     assert all(pressing.random_action(env.action_space, rng)[2] == 1.0 for _ in range(5))
-
-
-def test_a_move_and_press_types_a_known_neighbour_in_one_step(env_datasets, discrete_env):
-    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
-    agent = PlannerAgent(env.observation_space, env.action_space, PlannerConfig(move=0.5, move_press=True))
-    actions = continuous_actions(0.5, 0.0, move_press=True)
-    assert actions.shape == (len(DISCRETE_ACTIONS) + MOVES, 3)
-    np.testing.assert_array_equal(actions[PRESS + 1 :, :2], actions[:MOVES, :2])  # the same moves, deep
-    assert np.all(actions[PRESS:, 2] == 1.0) and np.all(actions[:MOVES, 2] == 0.0)
-    np.testing.assert_array_equal(agent.action_indices(actions), np.arange(len(actions)))
-    np.testing.assert_array_equal(graph_moves_of(np.arange(len(actions))), [0, 1, 2, 3, PRESS, 0, 1, 2, 3])
-    # A graph where DOWN from key 0 surely reaches key 1: the move and press there is worth all of it,
-    # more than the move (a step later) and than pressing key 0.
-    states = len(agent.state_class)
-    moves = np.full((states, MOVES, states), 1.0 / states)
-    moves[0, 1] = np.eye(states)[1]
-    given_graph(agent, moves)
-    values = agent.action_values(np.eye(states)[0], 1)
-    assert values.argmax() == PRESS + 1 + 1 and values[PRESS + 1 + 1] == pytest.approx(1.0)
-    assert values[1] == pytest.approx(agent.config.gamma) and values[PRESS] == 0.0
-    assert agent._values[1, 0] == pytest.approx(1.0)  # one step from the goal is worth the goal
-    with pytest.raises(ValueError, match="move_press is for the continuous tasks"):
-        PlannerAgent(
-            discrete_env.observation_space, discrete_env.action_space, PlannerConfig(move_press=True)
-        )
-
-
-def test_a_test_move_ends_in_a_press_where_the_graph_is_sure_it_reaches_the_goal(env_datasets, discrete_env):
-    env = gym.make(CONTINUOUS_TASK, dataset=env_datasets[CONTINUOUS_TASK])
-    config = PlannerConfig(press_accept=0.9, epsilon_start=0.0, epsilon_end=0.0)  # no random actions
-    agent = PlannerAgent(env.observation_space, env.action_space, config)
-    states = len(agent.state_class)
-    moves = np.full((states, MOVES, states), 1.0 / states)
-    moves[0, 1] = np.eye(states)[1]  # DOWN from key 0 surely reaches key 1
-    moves[0, 2] = 0.5 * np.eye(states)[1] + 0.5 * np.eye(states)[2]  # LEFT reaches it half the time
-    given_graph(agent, moves)
-    agent.read = lambda frames, batch_size=512: np.eye(agent.classes)[[0]]  # the sensor on key 0
-    observation, _ = env.reset(seed=0)
-    observation = {**observation, "desired_goal": np.eye(agent.keys, dtype=np.float32)[1]}
-    rng = np.random.default_rng(0)
-    typed = agent.policy_action(observation, 0, explore=False, rng=rng)
-    np.testing.assert_array_equal(typed, [*agent.continuous[1, :2], 1.0])  # DOWN, pressed at its end
-    assert agent.action_indices(typed[None]).tolist() == [PRESS + 1 + 1]  # read back as DOWN and a press
-    trained = agent.policy_action(observation, 10**6, explore=True, rng=rng)
-    np.testing.assert_array_equal(trained, agent.continuous[1])  # training moves and presses apart
-    agent.config = dataclasses.replace(agent.config, press_accept=None)
-    np.testing.assert_array_equal(
-        agent.policy_action(observation, 0, explore=False, rng=rng), agent.continuous[1]
-    )
-    agent.config = dataclasses.replace(agent.config, press_accept=0.9)
-    agent._moves[0, 1] = agent._moves[0, 2]  # now DOWN too reaches the goal only half the time
-    assert agent.policy_action(observation, 0, explore=False, rng=rng)[2] == agent.config.sense_depth
-    with pytest.raises(ValueError, match="press_accept ends a continuous task's moves"):
-        PlannerAgent(
-            discrete_env.observation_space, discrete_env.action_space, PlannerConfig(press_accept=0.9)
-        )
-    with pytest.raises(ValueError, match="press_accept is a probability"):
-        PlannerConfig(press_accept=1.5)
 
 
 def test_a_test_press_waits_for_a_frame_that_shows_the_goal(env_datasets):
@@ -547,32 +415,6 @@ def test_a_test_episode_moves_before_it_presses_without_first_press(env_datasets
     moved = {**env.reset(seed=0)[0], "desired_goal": goal, "previous_action": first}
     action = agent.policy_action(moved, 10**6, explore=False, rng=np.random.default_rng(0))
     np.testing.assert_array_equal(action, agent.continuous[PRESS])
-
-
-def test_a_move_and_press_labels_the_frame_it_reached_and_backtracks_through_its_move(env_datasets):
-    # Backtracking: an episode of one move and press (DOWN, onto key 1) from key 0.
-    classes = state_classes(2)
-    moves = np.full((len(classes), MOVES, len(classes)), 1e-6)
-    moves[:, :, 2] = 1.0  # everywhere else: nothing
-    moves[0, 1] = np.eye(len(classes))[1] + 1e-6
-    moves /= moves.sum(-1, keepdims=True)
-    anchors, rows, actions, achieved, starts, ends = ([-1, 1], [0], [1], [1], [0], [0])
-    arguments = (moves, classes, *map(np.array, (anchors, rows, actions, achieved, starts, ends)), 1.0, 0.9)
-    assert backtrack(*arguments, moved=np.array([True])).tolist() == [0, 1]  # read back through DOWN
-    assert backtrack(*arguments).tolist() == [-1, 1]  # a press that did not move: its frame is its own
-    # A refit on a continuous run's replay: each move and press that pressed a key labels the frame
-    # it reached with that key.
-    config = TrainConfig(task=CONTINUOUS_TASK, algo="planner", dataset=str(env_datasets[CONTINUOUS_TASK]),
-                         final_press=False, agent={"move_press": True, "entry_memory": True},
-                         replay={"relabel": "all", "capacity": 400})  # fmt: skip
-    rng = np.random.default_rng(0)
-    _, agent, buffer = random_replay(config, 300, rng)
-    agent.sample(buffer, 16, rng)
-    indices = agent.action_indices(buffer.actions[: buffer.size])
-    reached = np.flatnonzero((indices > PRESS) & (buffer.achieved[: buffer.size] >= 0))
-    assert len(reached) > 5
-    read = dict(zip(agent.label_frames, agent.label_classes, strict=True))
-    assert [read[f] for f in buffer.frame_index[reached, 1]] == list(buffer.achieved[reached])
 
 
 def test_entry_states_keep_how_the_sensor_came_onto_each_class(discrete_env):

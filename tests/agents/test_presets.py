@@ -48,8 +48,8 @@ def test_paper_preset_values(task, algo):
     assert config.agent.batch_size == 32
     paper_agent = {
         "dqn": {"gamma": 0.95, "learning_rate": 5e-4, "test_epsilon": 0.0, "hidden": (512,)},
-        "sac_discrete": {"gamma": 0.6, "learning_rate": 5e-4, "hidden": (512,), "shared_encoder": False},
-        "sac": {"gamma": 0.95, "target_entropy": -6.0, "hidden": (512,), "shared_encoder": False},
+        "sac_discrete": {"gamma": 0.6, "learning_rate": 5e-4, "hidden": (512,)},
+        "sac": {"gamma": 0.95, "target_entropy": -6.0, "hidden": (512,)},
         "td3": {"gamma": 0.95, "learning_rate": 5e-5, "policy_delay": 2, "hidden": (512,)},
     }[algo]
     for name, value in paper_agent.items():

@@ -27,6 +27,10 @@ import replay_helpers
 from replay_helpers import FEATURES, GOALS, Frames, as_images, replay_observation
 from tactile_braille.agents import replay as after
 from tactile_braille.agents.replay import (
+    GoalOutcomes,
+    PressFrames,
+    ReturnBounds,
+    SensorPoses,
     FRAME_LABELS,
     PACKED_BYTES,
     RELABELLING,
@@ -114,7 +118,7 @@ def test_press_frames_are_the_frames_presses_were_made_from_with_the_keys_they_p
         lit["observation"][:rows] = 255
         return lit
 
-    buffer = EpisodeReplayBuffer(100, GOALS, (), 5, relabel="all", press_frames=True)
+    buffer = EpisodeReplayBuffer(100, GOALS, (), 5, relabel="all", extras=(PressFrames(),))
     buffer.start_episode(frame(1, goal=0))
     buffer.add_step(0, 0.0, frame(2, goal=0), terminated=False)
     buffer.end_episode()  # a time-out: no press
@@ -133,13 +137,13 @@ def test_press_frames_are_the_frames_presses_were_made_from_with_the_keys_they_p
     run_episode(plain, goal=1, pressed=2)
     assert "press_images" not in plain.sample(4, np.random.default_rng(0))
     with pytest.raises(ValueError, match="discrete actions"):
-        EpisodeReplayBuffer(10, GOALS, (3,), 3, press_frames=True)
+        EpisodeReplayBuffer(10, GOALS, (3,), 3, extras=(PressFrames(),))
 
 
 def test_return_bounds_are_the_discounted_return_of_the_transitions_own_episode(tmp_path):
     """gamma ** k where the episode pressed the batch goal's key k steps after the transition, else 0;
     a saved and loaded buffer gives the same bounds (it keeps the steps remaining)."""
-    buffer = EpisodeReplayBuffer(100, GOALS, (), 5, her=False, gamma=0.5, return_bounds=True)
+    buffer = EpisodeReplayBuffer(100, GOALS, (), 5, her=False, extras=(ReturnBounds(0.5),))
     run_episode(buffer, goal=2, pressed=2, steps=3)  # actions 0, 1, 2: pressed 2 steps after the first
     run_episode(buffer, goal=1, pressed=3, steps=2)  # a wrong press: no bound under goal 1
     run_episode(buffer, goal=0, pressed=None, steps=2)  # a time-out: no bound
@@ -149,20 +153,20 @@ def test_return_bounds_are_the_discounted_return_of_the_transitions_own_episode(
     np.testing.assert_allclose(batch["return_bounds"], expected)
     assert set(np.unique(goals)) == {0, 1, 2} and batch["return_bounds"].dtype == np.float32
     buffer.save(tmp_path / "replay.npz")
-    again = EpisodeReplayBuffer(100, GOALS, (), 5, her=False, gamma=0.5, return_bounds=True)
+    again = EpisodeReplayBuffer(100, GOALS, (), 5, her=False, extras=(ReturnBounds(0.5),))
     again.load(tmp_path / "replay.npz")
     np.testing.assert_array_equal(
         again.sample(300, np.random.default_rng(0))["return_bounds"], batch["return_bounds"]
     )
     late = EpisodeReplayBuffer(
-        100, GOALS, (), 5, her=False, gamma=0.5, return_bounds=True, return_bounds_after=6
+        100, GOALS, (), 5, her=False, extras=(ReturnBounds(0.5, after=6),)
     )
     run_episode(late, goal=2, pressed=2, steps=3)
     assert not late.sample(50, np.random.default_rng(0))["return_bounds"].any()  # 3 transitions of 6
     run_episode(late, goal=2, pressed=2, steps=3)
     assert late.sample(50, np.random.default_rng(0))["return_bounds"].max() == 1.0  # 6: the bounds apply
     with pytest.raises(ValueError, match="return bounds need the agent's discount"):
-        EpisodeReplayBuffer(10, GOALS, (), 5, return_bounds=True)
+        ReturnBounds(None)
 
 
 def shifted(image: np.ndarray, rows: int, columns: int) -> np.ndarray:
@@ -359,7 +363,7 @@ def all_buffer(**kwargs) -> EpisodeReplayBuffer:
 
 
 def test_all_rewards_follow_the_pressed_key_and_the_sampled_goal():
-    buffer = all_buffer(all_goals=True)
+    buffer = all_buffer(extras=(GoalOutcomes(),))
     table = fill(buffer, Frames())
     batch = buffer.sample(3000, np.random.default_rng(0))
     goals = goal_indices(batch["goals"])
@@ -386,8 +390,8 @@ def test_all_rewards_follow_the_pressed_key_and_the_sampled_goal():
 def test_goal_weights_are_how_often_the_relabelling_samples_each_goal():
     """The weights an all-goals update may use are the sampling's own frequencies, per transition."""
     for buffer in (
-        all_buffer(all_goals=True),
-        all_buffer(relabel_final=0.7, relabel_random=0.1, all_goals=True),
+        all_buffer(extras=(GoalOutcomes(),)),
+        all_buffer(relabel_final=0.7, relabel_random=0.1, extras=(GoalOutcomes(),)),
     ):
         fill(buffer, Frames())
         batch = buffer.sample(40_000, np.random.default_rng(7))
@@ -398,7 +402,7 @@ def test_goal_weights_are_how_often_the_relabelling_samples_each_goal():
             counts = np.bincount(goals[rows], minlength=GOALS) / rows.sum()
             np.testing.assert_allclose(counts, weights[rows][0], atol=0.06)
     paper = EpisodeReplayBuffer(
-        100, GOALS, (), replay_helpers.PREVIOUS, max_episode_steps=10, relabel="paper", all_goals=True
+        100, GOALS, (), replay_helpers.PREVIOUS, max_episode_steps=10, relabel="paper", extras=(GoalOutcomes(),)
     )
     fill(paper, Frames())
     batch = paper.sample(50, np.random.default_rng(8))
@@ -796,7 +800,7 @@ def test_a_replay_with_poses_gives_each_transition_the_poses_of_its_two_frames()
         (feature_agents.ACTIONS,),
         feature_agents.PREVIOUS,
         observation_shape=(feature_agents.FEATURES,),
-        poses=True,
+        extras=(SensorPoses(),),
     )
     labels = one_step_episodes(buffer, 10)
     data = buffer.sample(32, np.random.default_rng(0))
@@ -822,7 +826,7 @@ def test_a_replay_with_poses_refuses_to_sample_unlabelled_frames():
         (feature_agents.ACTIONS,),
         feature_agents.PREVIOUS,
         observation_shape=(feature_agents.FEATURES,),
-        poses=True,
+        extras=(SensorPoses(),),
     )
     one_step_episodes(buffer, 3, labelled=False)
     with pytest.raises(RuntimeError, match="needs labelled frames"):
@@ -864,8 +868,15 @@ class Config:
         return module.EpisodeReplayBuffer(
             CAPACITY, GOALS, (ACTIONS,) if self.continuous else (), PREVIOUS, her=self.her,
             max_episode_steps=MAX_STEPS, relabel=self.relabel,
-            observation_shape=(VECTOR,) if self.vectors else (100, 100, 1), poses=self.poses, **self.kwargs,
+            observation_shape=(VECTOR,) if self.vectors else (100, 100, 1), **self.kwargs,
+            **self.poses_option(module),
         )  # fmt: skip
+
+    def poses_option(self, module) -> dict:
+        """The frozen buffer takes ``poses``; the current one serves poses as an extra."""
+        if module is after:
+            return {"extras": (after.SensorPoses(),) if self.poses else ()}
+        return {"poses": self.poses}
 
 
 CONFIGS = {

@@ -237,7 +237,8 @@ def test_an_all_goals_run_replays_the_pressed_keys_and_learns_every_goal(
     run = train(config, run_dir=tmp_path / "all-goals", progress=False)
     (row,) = read_progress(run)
     (buffer,) = recording
-    assert buffer.all_goals  # so its batches carry the pressed keys and the goals' weights
+    # The agent's replay serves every goal's outcome: its batches carry the pressed keys and goal weights.
+    assert [type(extra).__name__ for extra in buffer.extras] == ["GoalOutcomes"]
     loss = "losses/q_loss" if algo == "dqn" else "losses/qf_loss"
     assert row["updates"] == buffer.samples > 0 and math.isfinite(row[loss])
     assert json.loads((run / "config.json").read_text())["agent"]["all_goals"] is True

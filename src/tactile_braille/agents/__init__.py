@@ -1,8 +1,11 @@
 """The paper's agents with Hindsight Experience Replay: double + dueling DQN, discrete SAC, SAC, TD3;
 and ours, the key-graph planner.
 
-Names are imported on first use, so that ``tactile_braille.agents.config`` (the
-settings, which the command line is generated from) loads without torch.
+An agent is a class that keeps the :class:`Agent` contract, a hyperparameter
+class (an :class:`AgentConfig`), and one :class:`AgentSpec` given to
+:func:`register_agent` (docs/extending.md). Names are imported on first use,
+so that ``tactile_braille.agents.config`` (the settings, which the command
+line is generated from) loads without torch.
 """
 
 from __future__ import annotations
@@ -11,7 +14,14 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
-    "AGENTS": "training",
+    "Agent": "common",
+    "AgentConfig": "config",
+    "AgentSpec": "registry",
+    "register_agent": "registry",
+    "agent_spec": "registry",
+    "agent_names": "registry",
+    "BatchExtra": "replay",
+    "make_replay": "training",
     "train": "training",
     "make_agent": "training",
     "make_env": "training",

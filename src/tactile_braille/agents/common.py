@@ -14,6 +14,7 @@ with bf16 there warns once (:func:`native_bf16`).
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import functools
 import warnings
@@ -43,15 +44,17 @@ def observation_features(observation_space: gym.spaces.Dict) -> int | None:
     return int(shape[0]) if len(shape) == 1 else None
 
 
-def network_options(observation_space: gym.spaces.Dict, config) -> tuple[dict, dict]:
+def network_options(
+    observation_space: gym.spaces.Dict, layer_norm: bool = False, unit_features: bool = False
+) -> tuple[dict, dict]:
     """Keyword options of the actor's and the critics' networks: features (or the image's channels where
-    it stacks several taps), and LayerNorm in critics."""
+    it stacks several taps), and in critics LayerNorm and features scaled to unit length if asked."""
     actor: dict = {"features": observation_features(observation_space)}
     shape = observation_space["observation"].shape
     if len(shape) == 3 and shape[-1] > 1:
         actor["channels"] = int(shape[-1])
-    critic = {**actor, "layer_norm": bool(getattr(config, "layer_norm", False))}
-    if getattr(config, "unit_features", False):
+    critic = {**actor, "layer_norm": bool(layer_norm)}
+    if unit_features:
         critic["unit_features"] = True
     return actor, critic
 
@@ -66,7 +69,7 @@ def critic_poses(batch: dict[str, torch.Tensor], wanted: bool) -> tuple[tuple, t
         return (), ()
     if "poses" not in batch or "next_poses" not in batch:
         raise ValueError(
-            "critic_pose needs batches with 'poses' and 'next_poses' (a replay made with poses=True)"
+            "critic_pose needs batches with 'poses' and 'next_poses' (a replay with the SensorPoses extra)"
         )
     return (batch["poses"],), (batch["next_poses"],)
 
@@ -75,7 +78,7 @@ def every_goal_rewards(batch: dict[str, torch.Tensor], goal_size: int) -> torch.
     """Each transition's reward under every goal, shape (B, goal_size), for an all-goals update:
     1 where it pressed key g (``achieved``, its achieved goal; -1 for no press), else 0."""
     if "achieved" not in batch:
-        raise ValueError("all_goals needs batches with 'achieved' (a replay made with all_goals=True)")
+        raise ValueError("all_goals needs batches with 'achieved' (a replay with the GoalOutcomes extra)")
     achieved = batch["achieved"]
     return (achieved[:, None] == torch.arange(goal_size, device=achieved.device)).float()
 
@@ -127,17 +130,53 @@ def chosen(values: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
     return values.gather(-1, index).squeeze(-1)
 
 
-class Agent:
-    """Base of the agents: device, precision, checkpointing of named parts.
+class Agent(abc.ABC):
+    """The agent contract: what the training loop, checkpoints and evaluation call.
 
-    Subclasses list in ``checkpointed`` the attributes that make up their
-    state (modules, optimisers, tensors); ``state_dict`` and
-    ``load_state_dict`` follow that list.
+    An agent is registered with :func:`~tactile_braille.agents.registry.register_agent` and made by
+    the training loop as ``AgentClass(observation_space, action_space, config, device, precision)``:
+    the task's goal-conditioned Dict observation space (``observation``, ``desired_goal``,
+    ``achieved_goal``, ``previous_action``), its action space, the agent's
+    :class:`~tactile_braille.agents.config.AgentConfig`, a torch device and ``"fp32"`` or ``"bf16"``
+    (call ``super().__init__(device, precision)``).
+
+    The loop, each environment step: :meth:`random_action` during the run's start steps, else
+    :meth:`policy_action` with ``explore=True``; the transition goes into the replay (the buffer
+    :meth:`replay_extras` asks for). Each burst of updates: :meth:`update` on :meth:`sample`'s
+    batch, whose returned losses are logged. Each epoch: :meth:`end_epoch`, then test episodes and
+    typing with ``policy_action(..., explore=False)``. Checkpoints: :meth:`state_dict` /
+    :meth:`load_state_dict` over the attributes named in ``checkpointed``; policy snapshots:
+    :meth:`policy_state_dict` over ``policy_parts``.
+
+    Subclasses must implement :meth:`policy_action` and :meth:`update`, and list their state in
+    ``checkpointed`` (modules, optimisers, tensors) and what acting needs in ``policy_parts``.
     """
 
     checkpointed: ClassVar[tuple[str, ...]] = ()
+    """The attributes that make up the agent's state (modules, optimisers, tensors), for checkpoints."""
     policy_parts: ClassVar[tuple[str, ...]] = ()
     """The parts that acting needs (a policy snapshot: no optimisers, no targets)."""
+
+    @abc.abstractmethod
+    def policy_action(
+        self, observation: dict, step: int, explore: bool, rng: np.random.Generator, deterministic: bool = False
+    ):
+        """The action for one observation dict: an ``int`` for a ``Discrete`` space, a float32 array in
+        [-1, 1] for a ``Box``. ``step`` counts the run's environment steps (for exploration schedules);
+        ``explore`` is True while training and False in test episodes and typing; ``deterministic``
+        asks for the greedy action whatever the agent's test exploration. Draw randomness from ``rng``
+        only, so that runs repeat exactly."""
+
+    @abc.abstractmethod
+    def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
+        """Learn from one batch of :meth:`sample`; returns the losses to log by name (namespaced, e.g.
+        ``losses/q``). A name left out of one update keeps its last logged value."""
+
+    @classmethod
+    def replay_extras(cls, config) -> tuple:
+        """What this agent's updates read from the replay beyond the transitions, for its ``config``: a
+        tuple of :class:`~tactile_braille.agents.replay.BatchExtra` (the base: none)."""
+        return ()
 
     def __init__(self, device: str | torch.device, precision: str) -> None:
         if precision not in PRECISIONS:
@@ -187,10 +226,7 @@ class Agent:
 
     def policy_state_dict(self) -> dict:
         """What :meth:`policy_action` needs, for policy snapshots."""
-        parts = self.policy_parts
-        if getattr(getattr(self, "config", None), "shared_encoder", False):
-            parts = (*parts, "critics")  # the actor's encoder lives in the first critic
-        return {name: getattr(self, name).state_dict() for name in parts}
+        return {name: getattr(self, name).state_dict() for name in self.policy_parts}
 
     def load_policy_state_dict(self, state: dict) -> None:
         """Restore a :meth:`policy_state_dict` (enough to act, not to train on)."""

@@ -2,8 +2,10 @@
 
 ``TrainConfig`` holds the loop's schedule and the run's environment and
 machine settings, and one group per concern: ``agent`` (the algorithm's
-hyperparameters, a :class:`DQNConfig`, :class:`DiscreteSACConfig`,
-:class:`SACConfig` or :class:`TD3Config`), ``replay`` (:class:`ReplayConfig`),
+hyperparameters, an :class:`AgentConfig`: :class:`DQNConfig`,
+:class:`DiscreteSACConfig`, :class:`SACConfig`, :class:`TD3Config`,
+:class:`PlannerConfig`, or the class an agent registers with
+:mod:`~tactile_braille.agents.registry`), ``replay`` (:class:`ReplayConfig`),
 ``touch`` (:class:`TouchConfig`, the touch encoder of the ``fast`` preset) and
 ``evaluation`` (:class:`EvaluationConfig`). Each field's default is the
 paper's (Table II, the released code where the table is silent), written
@@ -33,7 +35,6 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal, Union
 
-Algorithm = Literal["dqn", "sac_discrete", "sac", "td3", "planner"]
 Backend = Literal["dataset", "render", "rig"]
 Edges = Literal["stop", "overrun"]
 TapDepth = Literal["commanded", "released"]
@@ -70,9 +71,8 @@ def _check_hyperparameters(config) -> None:
         problems.append(f"gamma must be in [0, 1], got {config.gamma}")
     if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
         problems.append(f"tau must be in (0, 1], got {config.tau}")
-    for name in ("inverse_dynamics", "pressed_key"):
-        if getattr(config, name, 0.0) < 0:
-            problems.append(f"{name} is a loss weight: at least 0, got {getattr(config, name)}")
+    if getattr(config, "pressed_key", 0.0) < 0:
+        problems.append(f"pressed_key is a loss weight: at least 0, got {config.pressed_key}")
     for name in ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps", "action_input_scale"):
         if getattr(config, name, 1.0) <= 0:
             problems.append(f"{name} must be positive, got {getattr(config, name)}")
@@ -93,7 +93,33 @@ def _check_hyperparameters(config) -> None:
 
 
 @dataclass(frozen=True)
-class DQNConfig:
+class AgentConfig:
+    """Base of every agent's hyperparameters (:class:`~tactile_braille.agents.registry.AgentSpec`'s
+    ``config``): a frozen dataclass whose every field has a default.
+
+    The training loop reads ``batch_size`` (samples per update) of every agent's config, and the
+    replay ``gamma`` (the discount of n-step returns) where ``replay.n_step`` > 1. Fields are checked
+    against their annotations when a config is made, and the usual hyperparameters against their
+    ranges (:data:`HYPERPARAMETER_RANGES`). An agent whose settings constrain the rest of the run
+    says so in :meth:`check_run`; one whose settings use what only a calibrated robot knows lists
+    them in :meth:`proprio_settings`.
+    """
+
+    def __post_init__(self) -> None:
+        _check_hyperparameters(self)
+
+    def check_run(self, run: TrainConfig) -> None:
+        """Refuse run settings this agent cannot learn with (a ``ValueError`` that names them); called
+        when a :class:`TrainConfig` is made. The base accepts every run."""
+
+    def proprio_settings(self) -> dict[str, str]:
+        """This agent's settings that use the arm's pose or the calibrated key layout (the ``proprio``
+        track), each with what it uses; the base has none."""
+        return {}
+
+
+@dataclass(frozen=True)
+class DQNConfig(AgentConfig):
     """Hyperparameters (defaults: the paper's Table II).
 
     Attributes:
@@ -133,9 +159,6 @@ class DQNConfig:
         weights_init: the networks' initial weights: ``"he"`` (ours: He-normal layers, heads near
             zero) or ``"released"`` (the released code's: variance scaling 1.0 over the fan-in from
             a truncated normal, LeCun's, for every layer and head).
-        inverse_dynamics: the weight of an auxiliary loss on the Q-network's encoder: a head
-            predicts each transition's action from the encoder's features of its two frames
-            (inverse dynamics; the action is the next observation's previous action). 0: none.
         pressed_key: the weight of an auxiliary loss on the Q-network's encoder: a linear head
             names the key under the sensor from the frames PRESS was chosen on, each labelled with
             the key its press pressed (the achieved goal, an observation: the ``tactile`` track; on
@@ -178,7 +201,6 @@ class DQNConfig:
     goal_heads: bool = False
     dueling_split: bool = False
     weights_init: WeightsInit = "he"
-    inverse_dynamics: float = 0.0
     pressed_key: float = 0.0
     return_bound: bool = False
     return_bound_after: int = 0
@@ -196,10 +218,15 @@ class DQNConfig:
                              "return_bound")  # fmt: skip
         if self.return_bound and self.all_goals:
             raise ValueError("return_bound bounds the sampled goal's target; all_goals computes every goal's")
+        if self.all_goals_weights != "uniform" and not self.all_goals:
+            raise ValueError("agent.all_goals_weights weighs the goals of an all-goals update: set agent.all_goals")
+
+    def check_run(self, run: TrainConfig) -> None:
+        check_goal_inputs(run, self.all_goals, self.goal_heads)
 
 
 @dataclass(frozen=True)
-class SACConfig:
+class SACConfig(AgentConfig):
     """Hyperparameters (defaults: the paper's Table II).
 
     Attributes:
@@ -216,8 +243,6 @@ class SACConfig:
         batch_size: transitions per update.
         hidden: units of the dense layers (the paper's 512; the released code's 1024, 512).
         layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
-        shared_encoder: the actor reuses the first critic's encoder, detached
-            (not the paper's setting; as in SAC-AE and DrQ).
         critic_pose: asymmetric critics that also see the sensor pose (batches then carry
             ``poses`` and ``next_poses``); the actor still acts on touch alone.
         weights_init: ``"he"`` (ours: He-normal layers, heads near zero) or ``"released"`` (the
@@ -243,19 +268,22 @@ class SACConfig:
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
-    shared_encoder: bool = False
     critic_pose: bool = False
     weights_init: WeightsInit = "he"
     log_std: LogStdRule = "clamp"
     action_input_scale: float = 1.0
     all_goals: bool = False
 
-    def __post_init__(self) -> None:
-        _check_hyperparameters(self)
+    def check_run(self, run: TrainConfig) -> None:
+        check_goal_inputs(run, self.all_goals)
+        check_critic_pose(run, self.critic_pose)
+
+    def proprio_settings(self) -> dict[str, str]:
+        return {"agent.critic_pose": CRITIC_POSE_USES} if self.critic_pose else {}
 
 
 @dataclass(frozen=True)
-class DiscreteSACConfig:
+class DiscreteSACConfig(AgentConfig):
     """Hyperparameters (defaults: the paper's Table II).
 
     Attributes:
@@ -273,8 +301,6 @@ class DiscreteSACConfig:
         batch_size: transitions per update.
         hidden: units of the dense layers after the encoder.
         layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
-        shared_encoder: the actor reuses the first critic's encoder, detached
-            (not the paper's setting; as in SAC-AE and DrQ).
         all_goals: every update teaches every goal, as DQN's: the critics' targets, the actor's
             loss and the temperature's entropy are computed under each goal for each sampled
             transition. ``False``: the sampled goal only.
@@ -296,18 +322,17 @@ class DiscreteSACConfig:
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
-    shared_encoder: bool = False
     all_goals: bool = False
     goal_heads: bool = False
     dueling: bool = True
     weights_init: WeightsInit = "he"
 
-    def __post_init__(self) -> None:
-        _check_hyperparameters(self)
+    def check_run(self, run: TrainConfig) -> None:
+        check_goal_inputs(run, self.all_goals, self.goal_heads)
 
 
 @dataclass(frozen=True)
-class TD3Config:
+class TD3Config(AgentConfig):
     """Hyperparameters (defaults: the paper's Table II).
 
     Attributes:
@@ -327,7 +352,6 @@ class TD3Config:
         batch_size: transitions per update.
         hidden: units of the dense layers.
         layer_norm: LayerNorm in the critics' dense layers (as DroQ's critics).
-        shared_encoder: the actor reuses the first critic's encoder, detached (not the paper's).
         critic_pose: asymmetric critics that also see the sensor pose (as SAC's).
         weights_init: the networks' initial weights, as :class:`SACConfig`'s.
         action_input_scale: the scale of actions inside the networks, as :class:`SACConfig`'s.
@@ -348,17 +372,19 @@ class TD3Config:
     batch_size: int = 32
     hidden: tuple[int, ...] = (512,)
     layer_norm: bool = False
-    shared_encoder: bool = False
     critic_pose: bool = False
     weights_init: WeightsInit = "he"
     action_input_scale: float = 1.0
 
-    def __post_init__(self) -> None:
-        _check_hyperparameters(self)
+    def check_run(self, run: TrainConfig) -> None:
+        check_critic_pose(run, self.critic_pose)
+
+    def proprio_settings(self) -> dict[str, str]:
+        return {"agent.critic_pose": CRITIC_POSE_USES} if self.critic_pose else {}
 
 
 @dataclass(frozen=True)
-class PlannerConfig:
+class PlannerConfig(AgentConfig):
     """Hyperparameters of the key-graph planner (ours, :mod:`~tactile_braille.agents.planner`).
 
     Attributes:
@@ -372,87 +398,41 @@ class PlannerConfig:
         hidden: units of the key reader's dense layers.
         refit_every: the graph, the labels and the values are refitted from the replay after this
             many new transitions.
-        graph_prior: pseudo-count spread evenly over the classes a move may lead to.
+        graph_prior: pseudo-count spread evenly over the states a move may lead to.
+        nothing_memory: a frame that reads *nothing* after a move off a key is placed by that key and
+            that move (a state each); False: every frame that reads nothing is the one state *nothing*.
+        backoff: pseudo-counts of a state off the keys' moves, spread as the moves of all the states
+            off the keys together.
         refit_passes: passes of each refit: the graph is counted with the labels so far, then the
             labels are backtracked on it (1: the graph from the presses' labels and the reader).
-        sharpen: the backtracking reads the graph's probabilities raised to this power (and
-            renormalised): a key graph's moves are nearly deterministic.
-        accept: a frame before a press is labelled while the backtracked key has at least this
+        sharpen: the backtracking reads the graph's probabilities raised to this power (renormalised).
+        accept: a frame before a press is labelled while the backtracked class has at least this
             probability.
-        optimism: a move the graph has not seen from the believed key is worth ``gamma`` (so the
-            run tries it); False: it is worth what the graph's prior says.
-        repeat_penalty: an action already taken in the episode from the class the planner reads
-            loses this much of its value for each time (0: none): cells off the keys all read alike,
-            and a plan on what it reads can circle through them.
-        filter: the belief carries the last one through the graph and the previous action (a Bayes
-            filter over the episode); False: the key reader's probabilities alone.
+        optimism: a move the graph has not seen from the believed state is worth ``gamma``; False:
+            what the graph's prior says.
+        repeat_penalty: the value an action loses for each time it was already taken from the
+            believed state in the episode (0: none).
+        filter: the belief is the last one carried through the graph and the previous action, weighed
+            by the reading (a Bayes filter over the episode); False: the key reader's reading alone.
         planning_sweeps: sweeps of value iteration.
         move: on the continuous tasks, the length of each of its four moves, a share of the task's
             largest (1: 10 mm on the arrows, 20 mm on the alphabet).
         sense_depth: on the continuous tasks, the normalised depth of the tap that ends each move
             (depth ``5 + 3 * sense_depth`` mm, commanded); its presses tap at 1 (8 mm).
-        entry_memory: its states are each class as reached by each move or none (the key and how the
-            sensor came onto it), in place of ``nothing_memory``'s: on the continuous tasks a move need
-            not leave the key, and how the sensor came onto it says which part it is on.
+        entry_memory: its states are each class as reached by each move or by none (the key and how
+            the sensor came onto it), in place of ``nothing_memory``'s.
         explore_press: the probability that a random action presses (None: uniform over the five).
-            Every press names the key under the sensor (its achieved goal), where a move names none.
-        move_press: on the continuous tasks, four more actions: each move with a press at its end (a
-            tap at the deepest depth) in place of the light tap, worth the belief that the move ends on
-            the goal key: a key the graph knows one move away is typed in one step, not two.
-        free_repeats: in the generic *nothing* (the state of an episode's start off the keys, and of
-            nothing after nothing) an action is taken this many times before ``repeat_penalty`` falls
-            on it; None: never (there repeating the best move is a straight line out, but a straight
-            line into the workspace's edge stays where it is, repeated until the time limit).
-        backtrack_evidence: going back from a press, the backtracking weighs in each frame's own
-            reading (the reader's probabilities over the class prior, raised to this power: a
-            backward Bayes filter); 0: the graph alone. On the continuous tasks a move's end is not
-            one key, and the graph alone stops the labelling a step or two before the press.
-        backtrack_prior: going back from a press, a frame's class is read from the backtracked
-            belief weighed by how often each state is occupied in the replay (Bayes' rule: ``P(state
-            | key pressed later) ∝ P(key pressed later | state) P(state)``); False: every state
-            equally likely, so that many rarely occupied states off the keys that also lead to the key
-            outweigh the key itself (a frame of P, from which UP stays on P, read as the cell under it).
-        reckon: on the discrete tasks, dead reckoning off the keys: a frame that reads *nothing* is
-            placed by the key (or the episode's start off the keys) it last left and the sum of the
-            moves since, up to this many cells away (further: the generic *nothing*), in place of
-            ``nothing_memory``'s key and last move alone (1 is that, with the start's four more). A
-            move off the keys then does not forget where it set out from, and each such state backs
-            off to the pooled moves off the keys as a translation: ``backoff`` pseudo-counts of the
-            keys the moves off the keys reach, and of staying off them one move further on. 0: off.
-        lost_value: a move into the generic *nothing* (which forgets where the sensor is; with
-            ``entry_memory``, into any of nothing's five states) is worth this share of that state's
-            value in the value iteration; its own moves are valued as they are. The generic nothing is
-            every cell off the keys at once, and its pooled moves promise each of the keys beside them
-            at every step (a lottery drawn again at each move), so a plan through it looks shorter
-            than it is. None: its value as it is.
-        press_accept: on the continuous tasks, a test episode's move (and typing's) ends in a press,
-            in the same step, where the graph gives the goal key at least this probability after it
-            (a key one move away is typed in one step, not a move and a press). Training episodes
-            move and press apart, as before. None: never.
-        press_reading: in test episodes (and typing), PRESS only where the reader gives the goal key
-            at least this probability on the frame under the sensor: a press ends the episode, and the
-            filter's belief, carried by the graph, can name the goal where the frame itself shows
-            another key (a move that did not leave its key). Where it does not, the belief starts again
-            from the frame (placed after the last move, as at an episode's start) and the plan takes
-            its best move. Training episodes press as before (a wrong press labels a frame). None: off.
-        first_press: whether a test episode (and typing) may PRESS on its first frame. False: the first
-            frame, read alone at an unknown place, names the key the reader has seen most like it (a
-            corner of a key outside the task's reads as one of the task's); the plan moves first, and
-            the belief the graph carries from that move weighs the frames after it (a key typed again
-            right after itself costs a move away and back).
-        locate: on the continuous tasks, a metric key map (:mod:`~tactile_braille.agents.locator`):
-            test episodes (and typing) aim each step from where the map places the sensor at the
-            goal's press points, with a press in the step that reaches one; the key graph acts until
-            a frame is read as a key with ``locate_accept``, and again after a press that pressed
-            nothing. Training episodes act with the graph alone (the map learns from its moves).
-        locate_accept: the reader's probability that a frame shows a key for the map to place it.
-        locate_margin: the least distance (the actions' units: 1 is the task's largest move) a press
-            point aimed at keeps from the nearest press of anything else.
-        locate_span: the most transitions a pair of frames the map is fitted on spans.
-        locate_learning_rate: Adam's step size for the map.
-        locate_ready: the map acts only once this share of the replay's presses of the task's keys lie
-            nearer another press with the same outcome than any press with another (where the map
-            places them; checked each epoch): before, it does not yet tell the keys apart.
+        free_repeats: in the generic *nothing* (an episode's start off the keys, and nothing after
+            nothing) an action is taken this many times before ``repeat_penalty`` falls on it; None: never.
+        backtrack_prior: the backtracked belief is read weighed by how often each state is occupied in
+            the replay (Bayes' rule); False: every state alike.
+        lost_value: in the value iteration a move into the generic *nothing* (with ``entry_memory``,
+            into any of nothing's states) is worth this share of that state's value; None: all of it.
+        press_reading: test episodes (and typing) PRESS only where the reader gives the goal key at
+            least this probability on the frame under the sensor, else start the belief again from the
+            frame and move; None: off.
+        first_press: whether a test episode (and typing) may PRESS on its first frame (False: it moves
+            first).
     """
 
     gamma: float = 0.9
@@ -467,7 +447,6 @@ class PlannerConfig:
     refit_every: int = 50
     graph_prior: float = 1e-3
     nothing_memory: bool = True
-    nothing_carry: bool = False
     backoff: float = 5.0
     refit_passes: int = 1
     sharpen: float = 4.0
@@ -480,49 +459,23 @@ class PlannerConfig:
     sense_depth: float = 0.0
     entry_memory: bool = False
     explore_press: float | None = None
-    move_press: bool = False
     free_repeats: int | None = None
-    backtrack_evidence: float = 0.0
     backtrack_prior: bool = False
-    reckon: int = 0
     lost_value: float | None = None
-    press_accept: float | None = None
     press_reading: float | None = None
     first_press: bool = True
-    locate: bool = False
-    locate_accept: float = 0.9
-    locate_margin: float = 0.15
-    locate_span: int = 3
-    locate_learning_rate: float = 3e-3
-    locate_ready: float = 0.95
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
         problems = []
-        if self.press_accept is not None and not 0.0 < self.press_accept <= 1.0:
-            problems.append(f"press_accept is a probability in (0, 1], got {self.press_accept}")
         if self.press_reading is not None and not 0.0 < self.press_reading <= 1.0:
             problems.append(f"press_reading is a probability in (0, 1], got {self.press_reading}")
-        if not 0.0 < self.locate_accept <= 1.0:
-            problems.append(f"locate_accept is a probability in (0, 1], got {self.locate_accept}")
-        if not 0.0 <= self.locate_ready <= 1.0 or self.locate_learning_rate <= 0:
-            problems.append(
-                f"locate_ready is a share in [0, 1] and locate_learning_rate positive, got "
-                f"{self.locate_ready}, {self.locate_learning_rate}"
-            )
-        if self.locate_margin < 0 or self.locate_span < 1:
-            problems.append(
-                f"locate_margin must not be negative and locate_span must be at least 1, got "
-                f"{self.locate_margin}, {self.locate_span}"
-            )
         if min(self.refit_every, self.refit_passes, self.planning_sweeps) < 1:
             problems.append("refit_every, refit_passes and planning_sweeps must be at least 1")
         if self.free_repeats is not None and self.free_repeats < 0:
             problems.append(f"free_repeats must not be negative, got {self.free_repeats}")
         if self.repeat_penalty < 0:
             problems.append(f"repeat_penalty must not be negative, got {self.repeat_penalty}")
-        if self.backtrack_evidence < 0:
-            problems.append(f"backtrack_evidence must not be negative, got {self.backtrack_evidence}")
         if self.graph_prior <= 0 or self.sharpen <= 0:
             problems.append(
                 f"graph_prior and sharpen must be positive, got {self.graph_prior}, {self.sharpen}"
@@ -533,12 +486,6 @@ class PlannerConfig:
             problems.append(f"move is a share of the largest move, in (0, 1], got {self.move}")
         if self.lost_value is not None and not 0.0 <= self.lost_value <= 1.0:
             problems.append(f"lost_value is a share in [0, 1], got {self.lost_value}")
-        if self.reckon < 0:
-            problems.append(f"reckon must not be negative, got {self.reckon}")
-        if self.reckon and (self.entry_memory or self.nothing_carry or not self.nothing_memory):
-            problems.append("reckon is a form of nothing_memory that entry_memory and nothing_carry replace")
-        if self.entry_memory and self.nothing_carry:
-            problems.append("nothing_carry is a form of the states off the keys that entry_memory replaces")
         if self.explore_press is not None and not 0.0 <= self.explore_press <= 1.0:
             problems.append(f"explore_press is a probability in [0, 1], got {self.explore_press}")
         if not -1.0 <= self.sense_depth < 1.0:
@@ -548,26 +495,18 @@ class PlannerConfig:
         if problems:
             raise ValueError("PlannerConfig: " + "; ".join(problems))
 
-
-AgentConfig = Union[DQNConfig, DiscreteSACConfig, SACConfig, TD3Config, PlannerConfig]  # noqa: UP007 - a runtime alias
-AGENT_CONFIGS: dict[str, type] = {
-    "dqn": DQNConfig,
-    "sac_discrete": DiscreteSACConfig,
-    "sac": SACConfig,
-    "td3": TD3Config,
-    "planner": PlannerConfig,
-}
-"""Each algorithm's hyperparameter dataclass."""
-ALGORITHMS: tuple[str, ...] = typing.get_args(Algorithm)
-CONTINUOUS_ALGORITHMS = frozenset({"sac", "td3"})
-"""Algorithms that act in continuous action spaces (the others choose among discrete actions)."""
-EITHER_KIND_ALGORITHMS = frozenset({"planner"})
-"""Algorithms that act in both: the planner takes five actions, as discrete or continuous ones."""
-
-
-def acts_in(algo: str, continuous: bool) -> bool:
-    """Whether ``algo`` acts in a continuous (True) or a discrete (False) task."""
-    return algo in EITHER_KIND_ALGORITHMS or (algo in CONTINUOUS_ALGORITHMS) == continuous
+    def check_run(self, run: TrainConfig) -> None:
+        task = run.braille_task
+        if task is not None and task.continuous and run.final_press:
+            raise ValueError(
+                f"the planner learns from its own five actions: on {run.task} set final_press=False (it "
+                f"presses with the move asked, none of them)"
+            )
+        if run.touch.enabled or run.taps > 1 or run.replay.shift:
+            raise ValueError(
+                "the planner reads each single tactile image itself: turn touch.enabled off, and keep "
+                "taps=1 and replay.shift=0"
+            )
 
 
 @dataclass(frozen=True)
@@ -664,7 +603,9 @@ class TrainConfig:
 
     Attributes:
         task: environment id (``tactile_braille/DiscreteArrows-v0``...).
-        algo: ``"dqn"``, ``"sac_discrete"``, ``"sac"`` or ``"td3"``.
+        algo: the agent, a registered name (:func:`~tactile_braille.agents.registry.agent_names`:
+            ``"dqn"``, ``"sac_discrete"``, ``"sac"``, ``"td3"``, ``"planner"`` and any an extension
+            registers).
         seed: seeds networks, exploration and environments.
         epochs: epochs to run.
         steps_per_epoch: environment steps per epoch (250).
@@ -726,7 +667,7 @@ class TrainConfig:
     """
 
     task: str = "tactile_braille/DiscreteArrows-v0"
-    algo: Algorithm = "dqn"
+    algo: str = "dqn"
     seed: int = 0
     epochs: int = 25
     steps_per_epoch: int = 250
@@ -757,9 +698,8 @@ class TrainConfig:
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
 
     def __post_init__(self) -> None:
-        if self.algo not in ALGORITHMS:
-            raise ValueError(f"unknown algorithm {self.algo!r}; choose one of {ALGORITHMS}")
-        agent_config = AGENT_CONFIGS[self.algo]
+        spec = _agent_spec(self.algo)  # raises for an unknown algo, naming the registered ones
+        agent_config = spec.config
         for name, group in {"agent": agent_config, **GROUPS}.items():  # a group may be given as a dict
             if isinstance(getattr(self, name), dict):
                 object.__setattr__(self, name, _from_dict(group, getattr(self, name), name))
@@ -768,7 +708,7 @@ class TrainConfig:
         elif not isinstance(self.agent, agent_config):
             raise ValueError(f"{self.algo} takes a {agent_config.__name__}, got {type(self.agent).__name__}")
         if self.updates_per_step is None:
-            object.__setattr__(self, "updates_per_step", 1 if self.algo == "td3" else 2)
+            object.__setattr__(self, "updates_per_step", spec.updates_per_step)
         if isinstance(self.frame_noise, list):  # as config.json stores it
             object.__setattr__(self, "frame_noise", tuple(self.frame_noise))
         check_types(self)
@@ -783,25 +723,8 @@ class TrainConfig:
         self._check_task()
         self._check_device()
         self._check_touch()
-        self._check_all_goals()
+        self.agent.check_run(self)
         self._check_track()
-
-    def _check_all_goals(self) -> None:
-        every = {name: getattr(self.agent, name, False) for name in ("all_goals", "goal_heads")}
-        if getattr(self.agent, "all_goals_weights", "uniform") != "uniform" and not every["all_goals"]:
-            raise ValueError(
-                "agent.all_goals_weights weighs the goals of an all-goals update: set agent.all_goals"
-            )
-        if every["all_goals"] and self.replay.n_step > 1:
-            raise ValueError(
-                f"agent.all_goals computes one-step targets for every goal: set replay.n_step=1, "
-                f"not {self.replay.n_step}"
-            )
-        for name, wanted in every.items():
-            if wanted and self.touch.goal_positions:
-                raise ValueError(
-                    f"agent.{name} reads the goal as a one-hot alone: turn touch.goal_positions off"
-                )
 
     def _check_track(self) -> None:
         outside = proprio_settings(self) if self.track == "tactile" else {}
@@ -826,14 +749,10 @@ class TrainConfig:
         from tactile_braille.envs.registry import task_of  # the environments' registry, not torch
 
         task = task_of(self.task)  # raises for an unknown id
-        if task is not None and not acts_in(self.algo, task.continuous):
-            kind = "continuous" if self.algo in CONTINUOUS_ALGORITHMS else "discrete"
-            raise ValueError(f"{self.algo} needs a {kind} task, got {self.task}")
-        if self.algo == "planner" and task is not None and task.continuous and self.final_press:
-            raise ValueError(
-                f"the planner learns from its own five actions: on {self.task} set final_press=False (it "
-                f"presses with the move asked, none of them)"
-            )
+        spec = _agent_spec(self.algo)
+        if task is not None and not spec.acts_in(task.continuous):
+            kinds = " or ".join(kind for kind in ("discrete", "continuous") if kind in spec.actions)
+            raise ValueError(f"{self.algo} needs a {kinds} task, got {self.task}")
         if self.keep_pose_fraction > 0 and task is None:
             raise ValueError(
                 f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "
@@ -868,6 +787,14 @@ class TrainConfig:
                 f"touch.goal_positions needs a braille task (a keyboard layout), got {self.task}"
             )
 
+    @property
+    def braille_task(self):
+        """The run's :class:`~tactile_braille.envs.tasks.Task` (key set and action kind), or None for
+        another registered goal-conditioned environment."""
+        from tactile_braille.envs.registry import task_of  # the environments' registry, not torch
+
+        return task_of(self.task)
+
     def _check_device(self) -> None:
         kind, _, index = self.device.partition(":")
         if kind not in ("cpu", "cuda", "mps") or (index and not index.isdigit()):
@@ -875,22 +802,14 @@ class TrainConfig:
 
     def _check_touch(self) -> None:
         touch = self.touch
-        if self.algo == "planner" and (touch.enabled or self.taps > 1 or self.replay.shift):
-            raise ValueError(
-                "the planner reads each single tactile image itself: turn touch.enabled off, and keep "
-                "taps=1 and replay.shift=0"
-            )
         needs_encoder = {
-            "agent.critic_pose": getattr(self.agent, "critic_pose", False),
             "touch.inputs='readout'": touch.inputs != "features",
             "touch.goal_positions": touch.goal_positions,
             "touch.pose_inputs": touch.pose_inputs,
         }
         for name, wanted in needs_encoder.items():
-            if wanted and not touch.enabled:
-                raise ValueError(
-                    f"{name} learns from a touch encoder's labelled frames: set touch.enabled too"
-                )
+            if wanted:
+                require_encoder(self, name)
         if touch.enabled and self.taps > 1:
             raise ValueError(
                 f"the touch encoder reads one tap at a time: taps={self.taps} stacks several, set taps=1"
@@ -906,12 +825,8 @@ class TrainConfig:
                 "touch.goal_positions with touch.labels='observation' reads the goal's offset off the "
                 "encoder's readout: set touch.inputs='readout'"
             )
-        for name in ("agent.critic_pose", "touch.pose_inputs"):
-            if needs_encoder[name] and touch.labels != "robot":
-                raise ValueError(
-                    f"{name} needs the arm's pose of every frame, which touch.labels='observation' "
-                    "does not record: set touch.labels='robot'"
-                )
+        if touch.pose_inputs:
+            require_encoder(self, "touch.pose_inputs", robot_labels=True)
         if touch.enabled and self.start_steps < 10:
             raise ValueError(
                 f"a touch encoder learns from the start steps: need at least 10, got {self.start_steps}"
@@ -957,10 +872,50 @@ def proprio_settings(config: TrainConfig) -> dict[str, str]:
         ("touch.goal_positions", config.touch.goal_positions and robot,
          "places the goal on the calibrated key layout"),
         ("touch.pose_inputs", config.touch.pose_inputs, "shows the agent the arm's pose"),
-        ("agent.critic_pose", getattr(config.agent, "critic_pose", False),
-         "shows the critics the arm's pose"),
     )  # fmt: skip
-    return {name: why for name, used, why in uses if used}
+    return {**{name: why for name, used, why in uses if used}, **config.agent.proprio_settings()}
+
+
+def require_encoder(run: TrainConfig, name: str, robot_labels: bool = False) -> None:
+    """Refuse the setting ``name``, which learns from a touch encoder's labelled frames, in a run without
+    one; with ``robot_labels``, also in one whose frames are not labelled with the arm's pose."""
+    if not run.touch.enabled:
+        raise ValueError(f"{name} learns from a touch encoder's labelled frames: set touch.enabled too")
+    if robot_labels and run.touch.labels != "robot":
+        raise ValueError(
+            f"{name} needs the arm's pose of every frame, which touch.labels='observation' does not "
+            "record: set touch.labels='robot'"
+        )
+
+
+def check_goal_inputs(run: TrainConfig, all_goals: bool, goal_heads: bool = False) -> None:
+    """Refuse a run that an agent reading the goal as a one-hot cannot learn with: an all-goals update
+    (``all_goals``) computes one-step targets, and it and ``goal_heads`` take no goal positions."""
+    if all_goals and run.replay.n_step > 1:
+        raise ValueError(
+            f"agent.all_goals computes one-step targets for every goal: set replay.n_step=1, "
+            f"not {run.replay.n_step}"
+        )
+    for name, wanted in (("all_goals", all_goals), ("goal_heads", goal_heads)):
+        if wanted and run.touch.goal_positions:
+            raise ValueError(f"agent.{name} reads the goal as a one-hot alone: turn touch.goal_positions off")
+
+
+CRITIC_POSE_USES = "shows the critics the arm's pose"
+"""What ``agent.critic_pose`` (SAC's and TD3's asymmetric critics) uses that only a calibrated robot knows."""
+
+
+def check_critic_pose(run: TrainConfig, critic_pose: bool) -> None:
+    """Refuse asymmetric critics (``critic_pose``) in a run whose frames are not labelled with the pose."""
+    if critic_pose:
+        require_encoder(run, "agent.critic_pose", robot_labels=True)
+
+
+def _agent_spec(algo: str):
+    """The registered agent ``algo`` (:mod:`~tactile_braille.agents.registry`, which imports this module)."""
+    from tactile_braille.agents.registry import agent_spec
+
+    return agent_spec(algo)
 
 
 GROUPS: dict[str, type] = {"replay": ReplayConfig, "touch": TouchConfig, "evaluation": EvaluationConfig}
@@ -983,14 +938,35 @@ _LEGACY_NAMES = {
 
 
 _LEGACY_AGENT = {
-    algo: {"adam_eps": 1e-8, **({"loss": "huber"} if algo == "dqn" else {})} for algo in AGENT_CONFIGS
+    algo: {"adam_eps": 1e-8, **({"loss": "huber"} if algo == "dqn" else {})}
+    for algo in ("dqn", "sac_discrete", "sac", "td3", "planner")
 }
-"""What runs written before a setting existed were trained with, where that differs from its default."""
+"""What runs of the project's own agents written before a setting existed were trained with, where that
+differs from its default."""
 
 
-_RETIRED_AGENT = {"planner": {"backtrack_readings": 0.0}}
-"""Settings since removed, with the one value the code still runs: records that give it read as
-without it (the planner's ``backtrack_readings``, removed unmeasured in session 32)."""
+_RETIRED_AGENT = {
+    "dqn": {"inverse_dynamics": 0.0},
+    "sac_discrete": {"shared_encoder": False},
+    "sac": {"shared_encoder": False},
+    "td3": {"shared_encoder": False},
+    "planner": {
+        "backtrack_readings": 0.0,
+        "locate": False,
+        "locate_accept": 0.9,
+        "locate_margin": 0.15,
+        "locate_span": 3,
+        "locate_learning_rate": 3e-3,
+        "locate_ready": 0.95,
+        "reckon": 0,
+        "nothing_carry": False,
+        "move_press": False,
+        "press_accept": None,
+        "backtrack_evidence": 0.0,
+    },
+}
+"""Each algorithm's removed settings, with the one value the code still runs: a record that gives a
+removed setting that value reads as one without it; any other value is refused."""
 
 
 def _without_retired(algo: str, agent: dict) -> dict:
@@ -1039,7 +1015,7 @@ def replace_settings(config: TrainConfig, changes: dict[str, Any]) -> TrainConfi
     changes = dict(changes)
     _refuse_unknown(TrainConfig, changes)
     algo = changes.get("algo", config.algo)
-    groups = {"agent": AGENT_CONFIGS.get(algo, type(config.agent)), **GROUPS}
+    groups = {"agent": _agent_spec(algo).config, **GROUPS}
     for name, group in groups.items():
         if isinstance(changes.get(name), dict):
             base = getattr(config, name) if (name != "agent" or algo == config.algo) else group()

@@ -18,10 +18,10 @@ from torch import nn
 from torch.nn import functional as F
 
 from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
+from tactile_braille.agents.replay import GoalOutcomes, PressFrames, ReturnBounds
 from tactile_braille.agents.config import DQNConfig
 from tactile_braille.agents.networks import (
     DuelingQNetwork,
-    InverseDynamicsHead,
     observation_tensors,
     soft_update,
 )
@@ -42,6 +42,16 @@ class DQNAgent(Agent):
     policy_parts = ("q",)
     checkpointed = ("q", "target", "optimiser")
 
+    @classmethod
+    def replay_extras(cls, config: DQNConfig) -> tuple:
+        """Every goal's outcome (``all_goals``), return bounds (``return_bound``) and press frames
+        (``pressed_key``), as its settings ask."""
+        return (
+            *([GoalOutcomes()] if config.all_goals else []),
+            *([ReturnBounds(config.gamma, config.return_bound_after)] if config.return_bound else []),
+            *([PressFrames()] if config.pressed_key > 0 else []),
+        )
+
     def __init__(
         self,
         observation_space: gym.spaces.Dict,
@@ -56,7 +66,7 @@ class DQNAgent(Agent):
         self.config = config or DQNConfig()
         self.num_actions = int(action_space.n)
         goal_size, previous_size = spaces_sizes(observation_space)
-        _, options = network_options(observation_space, self.config)
+        _, options = network_options(observation_space, self.config.layer_norm, self.config.unit_features)
         self.q = DuelingQNetwork(
             self.num_actions, goal_size, previous_size, self.config.hidden,
             goal_heads=self.config.goal_heads, dueling_split=self.config.dueling_split,
@@ -64,11 +74,6 @@ class DQNAgent(Agent):
         ).to(self.device)  # fmt: skip
         self.target = copy.deepcopy(self.q).requires_grad_(False)
         learnt = list(self.q.parameters())
-        self.inverse = None
-        if self.config.inverse_dynamics > 0:
-            self.inverse = InverseDynamicsHead(self.q.trunk.encoded, self.num_actions).to(self.device)
-            learnt += list(self.inverse.parameters())
-            self.checkpointed = (*self.checkpointed, "inverse")
         self.key_head = None
         if self.config.pressed_key > 0:
             self.key_head = nn.Linear(self.q.trunk.encoded, goal_size).to(self.device)
@@ -109,11 +114,8 @@ class DQNAgent(Agent):
         with self.autocast():
             q, target = self._all_goals_values(t) if self.config.all_goals else self._values(t)
             loss = self._loss(q, target, t)
-            inverse_loss = self._inverse_loss(t) if self.inverse is not None else None
             key_loss = self._pressed_key_loss(t) if self.key_head is not None else None
         total = loss
-        if inverse_loss is not None:
-            total = total + self.config.inverse_dynamics * inverse_loss
         if key_loss is not None:
             total = total + self.config.pressed_key * key_loss
         self.optimiser.zero_grad(set_to_none=True)
@@ -122,8 +124,6 @@ class DQNAgent(Agent):
         if self.config.target_update == "update":
             soft_update(self.q, self.target, self.config.tau)
         losses = {"losses/q_loss": loss.item(), "losses/q_values": q.mean().item()}
-        if inverse_loss is not None:
-            losses["losses/inverse_loss"] = inverse_loss.item()
         if key_loss is not None:
             losses["losses/pressed_key_loss"] = key_loss.item()
         return losses
@@ -133,19 +133,12 @@ class DQNAgent(Agent):
         keys they pressed (the replay's ``press_images`` and ``press_keys``); None before any press."""
         if "press_keys" not in t:
             raise ValueError(
-                "pressed_key needs batches with press frames (a replay made with press_frames=True)"
+                "pressed_key needs batches with press frames (a replay with the PressFrames extra)"
             )
         if len(t["press_keys"]) == 0:
             return None
         logits = self.key_head(self.q.trunk.encode(t["press_images"])).float()
         return F.cross_entropy(logits, t["press_keys"])
-
-    def _inverse_loss(self, t: dict[str, torch.Tensor]) -> torch.Tensor:
-        """Cross-entropy of the inverse-dynamics head's guess of each transition's action, from the
-        Q-network's encoder on both frames (one pass over the two batches)."""
-        features = self.q.trunk.encode(torch.cat([t["images"], t["next_images"]]))
-        logits = self.inverse(*features.chunk(2)).float()
-        return F.cross_entropy(logits, t["actions"])
 
     def _loss(self, q: torch.Tensor, target: torch.Tensor, t: dict[str, torch.Tensor]) -> torch.Tensor:
         """The TD loss, averaged over the batch and its goals (alike, or as ``all_goals_weights``)."""
@@ -167,7 +160,7 @@ class DQNAgent(Agent):
             target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
             if self.config.return_bound:
                 if "return_bounds" not in t:
-                    raise ValueError("return_bound needs batches with 'return_bounds' (return_bounds=True)")
+                    raise ValueError("return_bound needs batches with 'return_bounds' (the ReturnBounds extra)")
                 target = torch.maximum(target, t["return_bounds"])
         q_all = self.q(t["images"], t["goals"], t["previous_actions"])
         return chosen(q_all, t["actions"]).float(), target

@@ -14,11 +14,6 @@ features, such as those of a pretrained touch encoder,
 :mod:`~tactile_braille.supervised.touch`) the encoder is left out and the
 vectors join the features directly. ``layer_norm=True`` puts a LayerNorm
 before each dense ReLU (as DroQ's critics), for high update-to-data ratios.
-
-A trunk may *share* another network's encoder (``encoder=...``): its features
-are then detached, so only the owner (the critic) trains it, as in SAC-AE and
-DrQ. The shared encoder is not a submodule of the borrower: it is neither in
-its ``parameters()`` nor in its ``state_dict()``.
 """
 
 from __future__ import annotations
@@ -46,7 +41,6 @@ class GoalConditionedTrunk(nn.Module):
     Args:
         vector_size: total length of the vectors joined after the encoder.
         hidden: units of each dense layer.
-        encoder: another network's encoder to share (detached), or None for an own one.
         features: the observation is a vector of this many features (no encoder).
         layer_norm: a LayerNorm before each dense layer's ReLU.
         channels: channels of the image its own encoder reads (more than one: stacked taps,
@@ -59,7 +53,6 @@ class GoalConditionedTrunk(nn.Module):
         self,
         vector_size: int,
         hidden: Sequence[int] = (512,),
-        encoder: Encoder | None = None,
         features: int | None = None,
         layer_norm: bool = False,
         channels: int = 1,
@@ -69,15 +62,9 @@ class GoalConditionedTrunk(nn.Module):
         self.unit_features = bool(unit_features)
         if not hidden or min(hidden) < 1:
             raise ValueError(f"hidden needs at least one positive layer size, got {hidden}")
-        if features is not None and (features < 1 or encoder is not None):
-            raise ValueError(f"features={features} needs a positive size and no encoder")
-        self._shared: tuple[Encoder, ...] = ()
-        if features is not None:
-            self.encoder = None
-        elif encoder is None:
-            self.encoder = Encoder(channels)
-        else:
-            self._shared = (encoder,)
+        if features is not None and features < 1:
+            raise ValueError(f"features={features} needs a positive size")
+        self.encoder = None if features is not None else Encoder(channels)
         sizes = [(features or Encoder.output_size) + vector_size, *hidden]
         layers: list[nn.Module] = []
         for inputs, outputs in itertools.pairwise(sizes):
@@ -94,12 +81,9 @@ class GoalConditionedTrunk(nn.Module):
 
     def encode(self, images: torch.Tensor) -> torch.Tensor:
         """The features the dense layers take before the vectors: the encoder's, or the vector given."""
-        if self._shared:
-            features = self._shared[0](images).detach()
-        elif self.encoder is not None:
-            features = self.encoder(images)
-        else:
+        if self.encoder is None:
             return images.float()
+        features = self.encoder(images)
         return F.normalize(features, dim=-1) if self.unit_features else features
 
     def forward(self, images: torch.Tensor, *vectors: torch.Tensor) -> torch.Tensor:
@@ -202,7 +186,6 @@ class DuelingQNetwork(nn.Module):
         goal_size: length of the goal one-hot.
         previous_action_size: length of the previous-action vector.
         hidden: units of the dense layers (the paper's 512).
-        encoder: an encoder to share (detached), or None.
         goal_heads: heads for every goal instead of the goal as an input.
         dueling_split: the value head reads the first half of the last dense layer's units, the
             advantage head the rest (the released code's); otherwise both read all of them.
@@ -223,7 +206,6 @@ class DuelingQNetwork(nn.Module):
         goal_size: int,
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
-        encoder: Encoder | None = None,
         goal_heads: bool = False,
         dueling_split: bool = False,
         weights_init: str = "he",
@@ -241,7 +223,7 @@ class DuelingQNetwork(nn.Module):
         goal_input = not (goal_heads or goal_difference)
         vector_size = goal_size + previous_action_size if goal_input else previous_action_size
         heads = goal_size if goal_heads else 1
-        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
+        self.trunk = GoalConditionedTrunk(vector_size, hidden, **options)
         units = self.trunk.features
         self.difference = None
         if goal_difference:
@@ -303,22 +285,6 @@ class GoalDifference(nn.Module):
         return self.dense(self.place(hidden)[:, None] - places[None])
 
 
-class InverseDynamicsHead(nn.Module):
-    """Logits of the action taken between two frames, from an encoder's features of both: an auxiliary
-    task whose gradients shape the encoder (the action is in the next observation, so it is ``tactile``).
-    """
-
-    def __init__(self, features: int, num_actions: int, hidden: int = 256) -> None:
-        super().__init__()
-        self.layers = nn.Sequential(
-            nn.Linear(2 * features, hidden), nn.ReLU(), nn.Linear(hidden, num_actions)
-        )
-        self.layers.apply(he_init)
-
-    def forward(self, features: torch.Tensor, next_features: torch.Tensor) -> torch.Tensor:
-        return self.layers(torch.cat([features, next_features], dim=-1))
-
-
 class PolicyNetwork(nn.Module):
     """Categorical policy over discrete actions (same trunk, a logits head).
 
@@ -333,7 +299,6 @@ class PolicyNetwork(nn.Module):
         goal_size: int,
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
-        encoder: Encoder | None = None,
         goal_heads: bool = False,
         weights_init: str = "he",
         **options,
@@ -342,7 +307,7 @@ class PolicyNetwork(nn.Module):
         check_weights_init(weights_init)
         self.goal_heads, self.goal_size, self.num_actions = goal_heads, goal_size, num_actions
         vector_size = previous_action_size if goal_heads else goal_size + previous_action_size
-        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
+        self.trunk = GoalConditionedTrunk(vector_size, hidden, **options)
         self.logits = _small_head(self.trunk.features, (goal_size if goal_heads else 1) * num_actions)
         if weights_init == "released":
             self.apply(released_init)
@@ -383,7 +348,6 @@ class ContinuousQNetwork(nn.Module):
         goal_size: int,
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
-        encoder: Encoder | None = None,
         pose_size: int = 0,
         weights_init: str = "he",
         action_scale: float = 1.0,
@@ -394,7 +358,7 @@ class ContinuousQNetwork(nn.Module):
             raise ValueError(f"pose_size must be at least 0, got {pose_size}")
         _check_action_scale(action_scale)
         vector_size = goal_size + previous_action_size + action_size + pose_size
-        self.trunk = GoalConditionedTrunk(vector_size, hidden, encoder, **options)
+        self.trunk = GoalConditionedTrunk(vector_size, hidden, **options)
         self.q = _small_head(self.trunk.features, 1)
         self.pose_size, self.action_scale, self.goal_size = pose_size, action_scale, goal_size
         _released_continuous(self.trunk, [self.q], weights_init)
@@ -438,7 +402,6 @@ class GaussianPolicy(nn.Module):
         goal_size: int,
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
-        encoder: Encoder | None = None,
         weights_init: str = "he",
         log_std: str = "clamp",
         action_scale: float = 1.0,
@@ -448,7 +411,7 @@ class GaussianPolicy(nn.Module):
         if log_std not in LOG_STD_RULES:
             raise ValueError(f"log_std must be one of {LOG_STD_RULES}, got {log_std!r}")
         _check_action_scale(action_scale)
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, **options)
         self.mean = _small_head(self.trunk.features, action_size)
         self.log_std = _small_head(self.trunk.features, action_size)
         self.log_std_rule, self.action_scale, self.goal_size = log_std, action_scale, goal_size
@@ -495,14 +458,13 @@ class DeterministicPolicy(nn.Module):
         goal_size: int,
         previous_action_size: int,
         hidden: Sequence[int] = (512,),
-        encoder: Encoder | None = None,
         weights_init: str = "he",
         action_scale: float = 1.0,
         **options,
     ) -> None:
         super().__init__()
         _check_action_scale(action_scale)
-        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, encoder, **options)
+        self.trunk = GoalConditionedTrunk(goal_size + previous_action_size, hidden, **options)
         self.action = _small_head(self.trunk.features, action_size)
         self.action_scale = action_scale
         _released_continuous(self.trunk, [self.action], weights_init)

@@ -44,7 +44,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from tactile_braille.agents.config import AGENT_CONFIGS, TrainConfig, differences, replace_settings
+from tactile_braille.agents.config import TrainConfig, differences, replace_settings
+from tactile_braille.agents.registry import agent_spec
 from tactile_braille.envs.registry import task_of
 
 PRESETS = ("paper", "released", "fast", "fast-tactile")
@@ -285,8 +286,7 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
     """
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose one of {PRESETS}")
-    if algo not in AGENT_CONFIGS:
-        raise ValueError(f"unknown algorithm {algo!r}; choose one of {tuple(AGENT_CONFIGS)}")
+    agent_spec(algo)  # raises for an unknown name, listing the registered ones
     changes = paper_changes(task, algo)
     if name.startswith("fast"):  # fast keeps the noise it was made with, in the actions' [-1, 1] units
         changes.pop("agent", None)

@@ -357,6 +357,120 @@ def make_relabelling(relabel: str, her: bool = True, final: float = 0.4, random:
     return SampledRelabelling(final, random) if relabel == "all" else RELABELLINGS[relabel]()
 
 
+# ================================================================= batch extras
+class Sampled(NamedTuple):
+    """A batch's transitions as :meth:`EpisodeReplayBuffer.sample` drew them, for :class:`BatchExtra`."""
+
+    index: np.ndarray  # (B,) the sampled transitions' slots
+    last: np.ndarray  # (B,) the slot of each one's last step (itself, but for n-step returns)
+    frames: np.ndarray  # (B, 2) frame slots: the observation and the frame the target bootstraps from
+    goals: np.ndarray  # (B, goal_size) the goals the batch was relabelled to
+    observations: Callable[[np.ndarray], np.ndarray]  # frame slots -> images or encoder features
+
+
+class BatchExtra:
+    """Something an agent's updates read beyond the transitions, added to every batch the replay samples.
+
+    An agent asks for extras in :meth:`~tactile_braille.agents.common.Agent.replay_extras`; the shared
+    buffer knows none of them by name. :meth:`add` returns the batch's new entries; ``rng`` is the
+    run's generator (draw from it only where needed: the order of draws is part of a run).
+    """
+
+    keeps_remaining: ClassVar[bool] = False
+    """Whether it reads each transition's ``remaining`` steps (checkpoints then keep them)."""
+
+    def check(self, action_shape: tuple[int, ...]) -> None:
+        """Refuse a buffer it cannot serve (a ``ValueError``), before the buffer is made."""
+
+    def add(
+        self, buffer: EpisodeReplayBuffer, sampled: Sampled, rng: np.random.Generator
+    ) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+
+class GoalOutcomes(BatchExtra):
+    """For updates on every goal: each transition's pressed key (``achieved``, a goal index, -1 for none)
+    and how likely the relabelling gives it each goal (``goal_weights``, (B, goal_size))."""
+
+    def add(self, buffer, sampled, rng):
+        index = sampled.index
+        return {
+            "achieved": buffer.achieved[sampled.last].astype(np.int64),
+            "goal_weights": buffer.relabelling.goal_weights(buffer.goals[index], buffer.finals[index]),
+        }
+
+
+class ReturnBounds(BatchExtra):
+    """``return_bounds``: the discounted return each sampled transition's own episode went on to get under
+    the batch goal, ``gamma ** k`` where the episode pressed that goal key ``k`` steps after it, else 0
+    (a lower bound of the optimal value where moves are deterministic).
+
+    Args:
+        gamma: the agent's discount, in [0, 1].
+        after: the bounds are 0 until the buffer holds this many transitions.
+    """
+
+    keeps_remaining = True
+
+    def __init__(self, gamma: float, after: int = 0) -> None:
+        if gamma is None or not 0 <= gamma <= 1:
+            raise ValueError(f"return bounds need the agent's discount gamma in [0, 1], got {gamma}")
+        self.gamma, self.after = float(gamma), int(after)
+
+    def add(self, buffer, sampled, rng):
+        goals, index = sampled.goals, sampled.index
+        goal = np.where(goals.any(-1), goals.argmax(-1), -1)
+        pressed = (buffer.finals[index] == goal) & (goal >= 0) & (buffer.size >= self.after)
+        bounds = np.where(pressed, np.float32(self.gamma) ** buffer.remaining[index], 0.0)
+        return {"return_bounds": bounds.astype(np.float32)}
+
+
+class PressFrames(BatchExtra):
+    """``press_images``: as many frames a press was made from as the batch has transitions, drawn
+    uniformly among the stored transitions that pressed a task key, and ``press_keys``, the key each
+    pressed (its achieved goal, int64); none before the first press. Discrete actions only: there a
+    press does not move, so its frame shows the key."""
+
+    def check(self, action_shape):
+        if action_shape != ():
+            raise ValueError(
+                "press frames label the frame a press was made from with its key, which holds for "
+                f"discrete actions (a press does not move), not actions of shape {action_shape}"
+            )
+
+    def add(self, buffer, sampled, rng):
+        presses = np.flatnonzero(buffer.achieved[: buffer.size] >= 0)
+        if len(presses) == 0:
+            empty = sampled.observations(np.zeros(0, dtype=np.int64))
+            return {"press_images": empty, "press_keys": np.zeros(0, dtype=np.int64)}
+        index = presses[rng.integers(len(presses), size=len(sampled.index))]
+        return {
+            "press_images": sampled.observations(buffer.frame_index[index, 0]),
+            "press_keys": buffer.achieved[index].astype(np.int64),
+        }
+
+
+class SensorPoses(BatchExtra):
+    """``poses`` and ``next_poses``: the labelled sensor poses (x, y, depth in mm) of both frames, for
+    asymmetric critics (every sampled frame must be labelled)."""
+
+    def add(self, buffer, sampled, rng):
+        poses = buffer.store.labels[sampled.frames, :3]  # (B, 2, 3)
+        if np.isnan(poses).any():
+            raise RuntimeError("SensorPoses needs labelled frames, but a sampled frame has no labels")
+        return {"poses": poses[:, 0], "next_poses": poses[:, 1]}
+
+
+class EpisodeSteps(BatchExtra):
+    """Adds nothing to batches; its checkpoints keep each transition's ``remaining`` steps, for an agent
+    that reads the replay's episodes itself (the key-graph planner) and needs them after a resume."""
+
+    keeps_remaining = True
+
+    def add(self, buffer, sampled, rng):
+        return {}
+
+
 # ================================================================= the buffer
 def random_shift(images: np.ndarray, pixels: int, rng: np.random.Generator) -> np.ndarray:
     """Each of the (B, C, H, W) ``images`` moved by its own whole number of pixels in
@@ -390,27 +504,13 @@ class EpisodeReplayBuffer:
             a sampled transition takes its episode's pressed key, or a random goal.
         observation_shape: ``(H, W, 1)`` for binary images (bit-packed; ``(100, 100, 1)``
             by default), ``(n,)`` for feature vectors.
-        poses: batches also carry the labelled sensor poses (x, y, depth in mm) of
-            both frames, ``poses`` and ``next_poses``, for asymmetric critics.
-        all_goals: batches also carry each transition's pressed key (``achieved``, its goal
-            index, -1 for none) and how likely the relabelling gives it each goal
-            (``goal_weights``), for updates on every goal.
         n_step: steps of an episode a sampled transition's return spans (1: one-step
             transitions, the paper's); above 1 its rewards are discounted by ``gamma``.
         gamma: the agent's discount, needed where ``n_step`` > 1.
         shift: sampled images moved by up to this many pixels (:func:`random_shift`; 0: none).
-        press_frames: batches also carry as many frames that a press was made from
-            (``press_images``, uniformly among the stored transitions that pressed a task key) and
-            the key each press pressed (``press_keys``, its achieved goal); none before the first
-            press. Discrete actions only: there a press does not move, so its frame shows the key.
-        return_bounds: batches also carry ``return_bounds``: the discounted return each sampled
-            transition's own episode went on to get under the transition's batch goal,
-            ``gamma ** k`` where the episode pressed that goal key ``k`` steps after it, else 0 (a
-            lower bound of the optimal value where moves are deterministic; needs ``gamma``).
-        return_bounds_after: the bounds are 0 until the buffer holds this many transitions.
-        episodes: its checkpoints keep each transition's ``remaining`` steps, as n-step and return-bound
-            buffers' do: an agent that reads the replay's episodes (the key-graph planner) needs them
-            after a resume.
+        extras: what the agent's updates read beyond the transitions (:class:`BatchExtra`, from the
+            agent's :meth:`~tactile_braille.agents.common.Agent.replay_extras`), added to each batch
+            in this order.
     """
 
     def __init__(
@@ -425,23 +525,15 @@ class EpisodeReplayBuffer:
         relabel_final: float = 0.4,
         relabel_random: float = 0.4,
         observation_shape: tuple[int, ...] = (100, 100, 1),
-        poses: bool = False,
         n_step: int = 1,
         gamma: float | None = None,
-        all_goals: bool = False,
         shift: int = 0,
-        press_frames: bool = False,
-        return_bounds: bool = False,
-        return_bounds_after: int = 0,
-        episodes: bool = False,
+        extras: tuple[BatchExtra, ...] = (),
     ) -> None:
-        if return_bounds and (gamma is None or not 0 <= gamma <= 1):
-            raise ValueError(f"return bounds need the agent's discount gamma in [0, 1], got {gamma}")
-        if press_frames and action_shape != ():
-            raise ValueError(
-                "press_frames labels the frame a press was made from with its key, which holds for "
-                f"discrete actions (a press does not move), not actions of shape {action_shape}"
-            )
+        for extra in extras:
+            if not isinstance(extra, BatchExtra):
+                raise TypeError(f"extras must be BatchExtra instances, got {type(extra).__name__}")
+            extra.check(action_shape)
         if shift < 0:
             raise ValueError(f"shift is a number of pixels, at least 0, got {shift}")
         if n_step < 1:
@@ -461,9 +553,7 @@ class EpisodeReplayBuffer:
                 "probabilities that sum to at most 1"
             )
         self.capacity = int(capacity)
-        self.poses, self.all_goals = bool(poses), bool(all_goals)
-        self.press_frames, self.return_bounds = bool(press_frames), bool(return_bounds)
-        self.episodes, self.return_bounds_after = bool(episodes), int(return_bounds_after)
+        self.extras = tuple(extras)
         self.n_step, self.gamma = int(n_step), gamma
         self.shift = int(shift)
         self.her = her
@@ -629,45 +719,17 @@ class EpisodeReplayBuffer:
             "next_previous_actions": self.previous_actions[last, 1],
             "dones": self.dones[last],
         }
-        if self.all_goals:
-            batch["achieved"] = self.achieved[last].astype(np.int64)
-            batch["goal_weights"] = self.relabelling.goal_weights(self.goals[index], self.finals[index])
         if self.n_step > 1:
             batch["steps"] = steps
-        if self.return_bounds:
-            batch["return_bounds"] = self._return_bounds(index, goals)
-        if self.press_frames:
-            batch["press_images"], batch["press_keys"] = self._press_frames(batch_size, rng, observations)
+        sampled = Sampled(index, last, frames, goals, observations)
+        for extra in self.extras:
+            batch.update(extra.add(self, sampled, rng))
         if self.shift:
             if self.cache.features is not None:
                 raise RuntimeError(f"shift={self.shift} moves images, but this replay serves features")
             batch["images"] = random_shift(batch["images"], self.shift, rng)
             batch["next_images"] = random_shift(batch["next_images"], self.shift, rng)
-        if self.poses:
-            poses = self.store.labels[frames, :3]  # (B, 2, 3)
-            if np.isnan(poses).any():
-                raise RuntimeError("poses=True needs labelled frames, but a sampled frame has no labels")
-            batch["poses"], batch["next_poses"] = poses[:, 0], poses[:, 1]
         return batch
-
-    def _return_bounds(self, index: np.ndarray, goals: np.ndarray) -> np.ndarray:
-        """``gamma ** k`` for each sampled transition whose episode pressed its batch goal's key ``k`` steps
-        after it (its ``finals`` and ``remaining``), else 0 (float32)."""
-        goal = np.where(goals.any(-1), goals.argmax(-1), -1)
-        pressed = (self.finals[index] == goal) & (goal >= 0) & (self.size >= self.return_bounds_after)
-        return np.where(pressed, np.float32(self.gamma) ** self.remaining[index], 0.0).astype(np.float32)
-
-    def _press_frames(
-        self, count: int, rng: np.random.Generator, observations
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``count`` frames that presses were made from, drawn uniformly among the stored presses, and the
-        keys they pressed (int64); empty before the first press."""
-        presses = np.flatnonzero(self.achieved[: self.size] >= 0)
-        if len(presses) == 0:
-            empty = observations(np.zeros(0, dtype=np.int64))
-            return empty, np.zeros(0, dtype=np.int64)
-        index = presses[rng.integers(len(presses), size=count)]
-        return observations(self.frame_index[index, 0]), self.achieved[index].astype(np.int64)
 
     def _n_step_returns(
         self, index: np.ndarray, goals: np.ndarray, rewards: np.ndarray
@@ -736,10 +798,10 @@ class EpisodeReplayBuffer:
 
     @property
     def _saved(self) -> tuple[str, ...]:
-        """The transition arrays a checkpoint holds: ``remaining`` only where n-step returns, return
-        bounds or the agent (``episodes``) read it, so that other buffers write the files they always
+        """The transition arrays a checkpoint holds: ``remaining`` only where n-step returns or an extra
+        (:attr:`BatchExtra.keeps_remaining`) read it, so that other buffers write the files they always
         wrote."""
-        keeps = self.n_step > 1 or self.return_bounds or self.episodes
+        keeps = self.n_step > 1 or any(extra.keeps_remaining for extra in self.extras)
         return self._TRANSITIONS + (("remaining",) if keeps else ())
 
     def save(self, path: str | Path) -> None:

@@ -29,6 +29,7 @@ from tactile_braille.agents.common import (
     spaces_sizes,
 )
 from tactile_braille.agents.config import SACConfig
+from tactile_braille.agents.replay import GoalOutcomes, SensorPoses
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     GaussianPolicy,
@@ -54,6 +55,11 @@ class SACAgent(Agent):
         "actor", "critics", "targets", "log_alpha", "actor_optimiser", "critic_optimiser", "alpha_optimiser"
     )  # fmt: skip
 
+    @classmethod
+    def replay_extras(cls, config: SACConfig) -> tuple:
+        """Every goal's outcome (``all_goals``) and the sensor poses its critics see (``critic_pose``)."""
+        return (*([GoalOutcomes()] if config.all_goals else []), *([SensorPoses()] if config.critic_pose else []))
+
     def __init__(
         self,
         observation_space: gym.spaces.Dict,
@@ -66,7 +72,7 @@ class SACAgent(Agent):
         self.action_size = _unit_box_size(action_space, "SAC")
         self.config = config = config or SACConfig()
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
-        actor_options, critic_options = network_options(observation_space, config)
+        actor_options, critic_options = network_options(observation_space, config.layer_norm)
         for options in (actor_options, critic_options):
             options.update(weights_init=config.weights_init, action_scale=config.action_input_scale)
         actor_options["log_std"] = config.log_std
@@ -74,8 +80,7 @@ class SACAgent(Agent):
         self.critics = nn.ModuleList(
             [ContinuousQNetwork(*sizes, pose_size=pose_size, **critic_options) for _ in range(2)]
         ).to(self.device)
-        shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
-        self.actor = GaussianPolicy(*sizes, encoder=shared, **actor_options).to(self.device)
+        self.actor = GaussianPolicy(*sizes, **actor_options).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
         self.log_alpha = torch.full(
             (1,), math.log(config.initial_alpha), device=self.device, requires_grad=True

@@ -21,6 +21,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
+from tactile_braille.agents.replay import GoalOutcomes
 from tactile_braille.agents.config import DiscreteSACConfig
 from tactile_braille.agents.networks import DuelingQNetwork, PolicyNetwork, observation_tensors, soft_update
 from tactile_braille.supervised.fit import adam
@@ -42,6 +43,11 @@ class DiscreteSACAgent(Agent):
         "actor", "critics", "targets", "log_alpha", "actor_optimiser", "critic_optimiser", "alpha_optimiser"
     )  # fmt: skip
 
+    @classmethod
+    def replay_extras(cls, config: DiscreteSACConfig) -> tuple:
+        """Every goal's outcome where it updates every goal (``all_goals``)."""
+        return (GoalOutcomes(),) if config.all_goals else ()
+
     def __init__(
         self,
         observation_space: gym.spaces.Dict,
@@ -56,15 +62,14 @@ class DiscreteSACAgent(Agent):
         self.config = config = config or DiscreteSACConfig()
         self.num_actions = int(action_space.n)
         sizes = (self.num_actions, *spaces_sizes(observation_space), config.hidden)
-        actor_options, critic_options = network_options(observation_space, config)
+        actor_options, critic_options = network_options(observation_space, config.layer_norm)
         actor_options["goal_heads"] = critic_options["goal_heads"] = config.goal_heads
         actor_options["weights_init"] = critic_options["weights_init"] = config.weights_init
         critic_options["dueling"] = config.dueling
         self.critics = nn.ModuleList([DuelingQNetwork(*sizes, **critic_options) for _ in range(2)]).to(
             self.device
         )
-        shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
-        self.actor = PolicyNetwork(*sizes, encoder=shared, **actor_options).to(self.device)
+        self.actor = PolicyNetwork(*sizes, **actor_options).to(self.device)
         self.targets = copy.deepcopy(self.critics).requires_grad_(False)
         self.log_alpha = torch.full(
             (1,), math.log(config.initial_alpha), device=self.device, requires_grad=True

@@ -25,6 +25,7 @@ from tactile_braille.agents.common import (
     spaces_sizes,
 )
 from tactile_braille.agents.config import TD3Config
+from tactile_braille.agents.replay import SensorPoses
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     DeterministicPolicy,
@@ -52,6 +53,11 @@ class TD3Agent(Agent):
         "critic_updates",
     )  # fmt: skip
 
+    @classmethod
+    def replay_extras(cls, config: TD3Config) -> tuple:
+        """The sensor poses its critics see (``critic_pose``)."""
+        return (SensorPoses(),) if config.critic_pose else ()
+
     def __init__(
         self,
         observation_space: gym.spaces.Dict,
@@ -66,20 +72,16 @@ class TD3Agent(Agent):
         if config.policy_delay < 1:
             raise ValueError(f"policy_delay must be at least 1, got {config.policy_delay}")
         sizes = (self.action_size, *spaces_sizes(observation_space), config.hidden)
-        actor_options, critic_options = network_options(observation_space, config)
+        actor_options, critic_options = network_options(observation_space, config.layer_norm)
         for options in (actor_options, critic_options):
             options.update(weights_init=config.weights_init, action_scale=config.action_input_scale)
         pose_size = POSE_SIZE if config.critic_pose else 0
         self.critics = nn.ModuleList(
             [ContinuousQNetwork(*sizes, pose_size=pose_size, **critic_options) for _ in range(2)]
         ).to(self.device)
-        shared = self.critics[0].trunk.encoder if config.shared_encoder else None  # None on features
-        self.actor = DeterministicPolicy(*sizes, encoder=shared, **actor_options).to(self.device)
+        self.actor = DeterministicPolicy(*sizes, **actor_options).to(self.device)
         self.critic_targets = copy.deepcopy(self.critics).requires_grad_(False)
-        target_shared = self.critic_targets[0].trunk.encoder if config.shared_encoder else None
-        self.actor_target = DeterministicPolicy(*sizes, encoder=target_shared, **actor_options).to(
-            self.device
-        )
+        self.actor_target = DeterministicPolicy(*sizes, **actor_options).to(self.device)
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.actor_target.requires_grad_(False)
         self.actor_optimiser = adam(self.actor.parameters(), config.learning_rate, config.adam_eps)

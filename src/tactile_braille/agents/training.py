@@ -15,17 +15,16 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
 
 from tactile_braille._io import exclusive_lock
-from tactile_braille.agents.config import AGENT_CONFIGS, CONTINUOUS_ALGORITHMS, TrainConfig, acts_in
-from tactile_braille.agents.dqn import DQNAgent
+from tactile_braille.agents.config import TrainConfig
 from tactile_braille.agents.extensions import RunExtension, make_extension
-from tactile_braille.agents.planner import PlannerAgent
+from tactile_braille.agents.registry import agent_spec
 from tactile_braille.agents.replay import EpisodeReplayBuffer
 from tactile_braille.agents.rollout import evaluate
 from tactile_braille.agents.run import (
@@ -44,30 +43,11 @@ from tactile_braille.agents.run import (
     warm_start,
     write_config,
 )
-from tactile_braille.agents.sac import SACAgent
-from tactile_braille.agents.sac_discrete import DiscreteSACAgent
-from tactile_braille.agents.td3 import TD3Agent
 from tactile_braille.agents.touch import TouchAgent, feature_space, touch_input_size
 from tactile_braille.envs.memory import TapMemory
 from tactile_braille.envs.registry import task_of
 from tactile_braille.envs.tasks import DISCRETE_ACTIONS
 from tactile_braille.supervised.touch import TouchEncoder, TouchEncoderConfig
-
-
-class Algorithm(NamedTuple):
-    agent: type
-    config: type
-    continuous: bool
-
-
-AGENTS = {
-    name: Algorithm(agent, AGENT_CONFIGS[name], continuous=name in CONTINUOUS_ALGORITHMS)
-    for name, agent in (
-        ("dqn", DQNAgent), ("sac_discrete", DiscreteSACAgent), ("sac", SACAgent), ("td3", TD3Agent),
-        ("planner", PlannerAgent),
-    )
-}  # fmt: skip
-"""Implemented algorithms: agent class, hyperparameter dataclass, action kind."""
 
 
 def train(
@@ -287,14 +267,14 @@ def make_env(config: TrainConfig, rig=None, **kwargs: Any) -> gym.Env:
 
 
 def make_agent(config: TrainConfig, env: gym.Env):
-    """The run's agent for the task's spaces (a :class:`TouchAgent` with ``touch.enabled``)."""
-    algorithm = AGENTS[config.algo]
-    if not acts_in(config.algo, isinstance(env.action_space, gym.spaces.Box)):
+    """The run's agent (:func:`~tactile_braille.agents.registry.agent_spec`'s class) for the task's spaces
+    (a :class:`TouchAgent` around it with ``touch.enabled``)."""
+    spec = agent_spec(config.algo)
+    if not spec.acts_in(isinstance(env.action_space, gym.spaces.Box)):
         raise ValueError(f"{config.algo} cannot act in {config.task}'s action space {env.action_space}")
+    agent_class = spec.agent_class
     if not config.touch.enabled:
-        return algorithm.agent(
-            env.observation_space, env.action_space, config.agent, config.device, config.precision
-        )
+        return agent_class(env.observation_space, env.action_space, config.agent, config.device, config.precision)
     keys = env.observation_space["desired_goal"].shape[0]
     touch = config.touch
     encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden, touch.labels)
@@ -305,7 +285,7 @@ def make_agent(config: TrainConfig, env: gym.Env):
         positions = np.array([layout.centre_mm(key) for key in env.unwrapped.goal_keys])
     size = touch_input_size(encoder, touch.inputs, touch.pose_inputs, goal_offsets=learnt)
     space = feature_space(env.observation_space, size, goal_positions=positions is not None)
-    agent = algorithm.agent(space, env.action_space, config.agent, config.device, config.precision)
+    agent = agent_class(space, env.action_space, config.agent, config.device, config.precision)
     return TouchAgent(
         agent,
         encoder,
@@ -317,8 +297,10 @@ def make_agent(config: TrainConfig, env: gym.Env):
 
 
 def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
-    """The run's replay buffer for the task's spaces."""
+    """The run's replay buffer for the task's spaces, serving what the agent's updates read
+    (:meth:`~tactile_braille.agents.common.Agent.replay_extras`)."""
     spaces = env.observation_space
+    extras = agent_spec(config.algo).agent_class.replay_extras(config.agent)
     return EpisodeReplayBuffer(
         config.replay.capacity,
         spaces["desired_goal"].shape[0],
@@ -328,13 +310,8 @@ def make_replay(config: TrainConfig, env: gym.Env) -> EpisodeReplayBuffer:
         max_episode_steps=max(getattr(env.spec, "max_episode_steps", None) or 0, 100),
         relabel=config.replay.relabel,
         observation_shape=spaces["observation"].shape,
-        poses=getattr(config.agent, "critic_pose", False),
         n_step=config.replay.n_step,
-        gamma=config.agent.gamma,
-        all_goals=getattr(config.agent, "all_goals", False),
+        gamma=config.agent.gamma if config.replay.n_step > 1 else None,
         shift=config.replay.shift,
-        press_frames=getattr(config.agent, "pressed_key", 0.0) > 0,
-        return_bounds=getattr(config.agent, "return_bound", False),
-        return_bounds_after=getattr(config.agent, "return_bound_after", 0),
-        episodes=config.algo == "planner",  # its refits read the replay's episodes
+        extras=extras,
     )

@@ -26,12 +26,12 @@ import numpy as np
 
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.config import TrainConfig, flatten
+from tactile_braille.agents.registry import PAPER_AGENTS, agent_label
 from tactile_braille.agents.report import convergence_epoch
 from tactile_braille.agents.run import read_config, read_progress, run_world
 from tactile_braille.datasets.collector import GENERATOR_VERSION
 from tactile_braille.envs.registry import task_name, task_of
 
-ALGO_NAMES = {"dqn": "DQN", "sac_discrete": "SAC_DISC", "sac": "SAC", "td3": "TD3"}
 TASK_NAMES = {
     "DiscreteArrows-v0": "disc arrow", "DiscreteAlphabet-v0": "disc alpha",
     "ContinuousArrows-v0": "cont arrow", "ContinuousAlphabet-v0": "cont alpha",
@@ -265,7 +265,7 @@ def departures(config: TrainConfig) -> list[str]:
 
 
 def _label(algo: str, variant: str) -> str:
-    return ALGO_NAMES.get(algo, algo) + (f" ({variant})" if variant else "")
+    return agent_label(algo) + (f" ({variant})" if variant else "")
 
 
 TRACK_TITLES = {
@@ -365,7 +365,7 @@ def coverage_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
             if short:
                 status += f"; {len(short)} stopped at epoch {', '.join(map(str, short))}"
             lines.append(
-                f"| {TASK_NAMES[task]}, {ALGO_NAMES[algo]} | {preset} | {PRESET_TRACKS[preset]} "
+                f"| {TASK_NAMES[task]}, {agent_label(algo)} | {preset} | {PRESET_TRACKS[preset]} "
                 f"| {len(done)} | {epochs_text} | {asked} | {status} |"
             )
     return "\n".join(lines)
@@ -653,7 +653,7 @@ def plot_trajectories(record: RunRecord, path: str | Path, goals: int = 3, seed:
             ax.axis("off")
             pressed = episode.info.get("pressed_key") or "nothing"
             ax.set_title(f"epoch {epoch}: goal {goal}, pressed {pressed}, {episode.steps} steps", fontsize=7)
-    fig.suptitle(f"{record.task}, {ALGO_NAMES.get(record.algo, record.algo)}, seed {record.seed}", fontsize=9)
+    fig.suptitle(f"{record.task}, {agent_label(record.algo)}, seed {record.seed}", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)
 
@@ -729,8 +729,8 @@ def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str 
             if original is not None:
                 shown = original[0] < longest * 1.2
                 ax.plot(original[0][shown] + 1, original[1][shown], color=shade, lw=1, ls=dashes,
-                        label=f"{ALGO_NAMES[algo]}, original release's log (sim, seed 1)")  # fmt: skip
-        paper = [f"{ALGO_NAMES[a]} {PAPER_TABLE[('sim', task, a)][2]}" for a in ALGO_NAMES
+                        label=f"{agent_label(algo)}, original release's log (sim, seed 1)")  # fmt: skip
+        paper = [f"{agent_label(a)} {PAPER_TABLE[('sim', task, a)][2]}" for a in PAPER_AGENTS
                  if ("sim", task, a) in PAPER_TABLE]  # fmt: skip
         ax.axhline(0.95, color="grey", lw=0.6)
         ax.set_title(f"{task} (paper's convergence epochs: {', '.join(paper)})", fontsize=9)

@@ -24,7 +24,8 @@ from tactile_braille.agents.run import read_config, read_progress, run_world
 from tactile_braille.envs.memory import TapMemory
 from tactile_braille.envs.registry import task_name, task_of
 from tactile_braille.evaluation.protocol import paper_sequences
-from tactile_braille.evaluation.report import ALGO_NAMES, departures
+from tactile_braille.agents.registry import agent_label, agent_spec
+from tactile_braille.evaluation.report import departures
 from tactile_braille.evaluation.results import make_result, read_result, write_result
 from tactile_braille.evaluation.scoring import (
     TypingReport,
@@ -43,9 +44,9 @@ LEGACY_VERSION = "0.1.0"
 def run_method(config) -> str:
     """A run's method name on a leaderboard: algorithm, HER, preset, and each setting in which the run
     departs from its preset (``name=value``): a preset's name alone would claim the preset's agent."""
-    her = " + HER" if config.replay.her else ""
+    her = " + HER" if config.replay.her and agent_spec(config.algo).hindsight else ""
     settings = "".join(f", {change}" for change in departures(config))
-    algo = ALGO_NAMES.get(config.algo, config.algo)
+    algo = agent_label(config.algo)
     return f"tactile_braille {algo}{her} (`{config.preset or 'custom'}`{settings})"
 
 
