@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -21,6 +22,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 def _load(name: str):
     spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # as an import would: dataclasses read their module's names
     spec.loader.exec_module(module)
     return module
 
@@ -94,3 +96,33 @@ def test_the_cleanrl_papers_her_stores_a_wrong_press_again_with_the_pressed_key(
     # Rewarded: the last step of the copy (goal DOWN) and of the right press, never under goal UP.
     assert rewarded.any() and np.all(stored["goal"].numpy()[rewarded] == down)
     assert np.all(rewarded == (stored["terminated"].numpy() == 1.0) & (stored["goal"].numpy() == down).all(1))
+
+
+def test_a_custom_agent_is_one_file_registered_trained_by_the_loop_and_scored(
+    env_datasets, tmp_path, capsys, monkeypatch
+):
+    """examples/custom_agent.py: an agent defined and registered outside src/, trained for an epoch by the
+    project's own loop and typed by evaluate_policy; the registry then lists it like our own."""
+    from tactile_braille.agents import registry
+    from tactile_braille.agents.config import TrainConfig
+
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # the other tests' registry is ours
+    from tactile_braille.agents.registry import agent_names, agent_spec
+    from tactile_braille.agents.run import read_progress
+
+    module = _load("custom_agent")
+    run = tmp_path / "pooled_q"
+    argv = ["--epochs", "1", "--steps-per-epoch", "60", "--run-dir", str(run), "--dataset", str(env_datasets[ARROWS])]
+    assert module.main(argv) == 0
+    (row,) = read_progress(run)
+    assert row["env_steps"] == 60 and row["updates"] > 0 and np.isfinite(row["losses/q_loss"])
+    assert "typing accuracy" in capsys.readouterr().out
+    assert "pooled_q" in agent_names() and agent_spec("pooled_q").label == "Pooled Q"
+    config = TrainConfig(algo="pooled_q", agent={"pool": 20})  # its settings are checked as ours are
+    assert config.agent.pool == 20 and config.updates_per_step == 2
+    with pytest.raises(ValueError, match="pool must divide"):
+        TrainConfig(algo="pooled_q", agent={"pool": 7})
+    with pytest.raises(ValueError, match="pooled_q needs a discrete task"):
+        TrainConfig(algo="pooled_q", task="tactile_braille/ContinuousArrows-v0")
+    source = Path(__file__).resolve().parents[1] / "src"
+    assert not any("pooled_q" in path.read_text() for path in source.rglob("*.py"))  # src/ never names it

@@ -1,4 +1,5 @@
-"""Do two training runs log the same epochs? Every column of progress.csv but the timings, exactly.
+"""Do two training runs log the same epochs? Every column of progress.csv but the timings, exactly (a
+column one log lacks reads as blank: logs name only the losses their agent returned).
 
 A refactor of the training code must not change what a run learns: run the
 same command before and after it (``--threads 1``) and compare. Exits 1 when a
@@ -25,10 +26,11 @@ def differences(run_a: Path, run_b: Path) -> list[str]:
             logs.append(list(csv.DictReader(handle)))
     found = [f"epochs: {len(logs[0])} != {len(logs[1])}"] if len(logs[0]) != len(logs[1]) else []
     for row_a, row_b in zip(*logs, strict=False):
+        columns = dict.fromkeys([*row_a, *row_b])  # a column one log lacks reads as blank
         found += [
-            f"epoch {row_a['epoch']} {column}: {row_a[column]} != {row_b.get(column)}"
-            for column in row_a
-            if column not in TIMINGS and row_a[column] != row_b.get(column)
+            f"epoch {row_a['epoch']} {column}: {row_a.get(column, '')} != {row_b.get(column, '')}"
+            for column in columns
+            if column not in TIMINGS and row_a.get(column, "") != row_b.get(column, "")
         ]
     return found
 

@@ -47,7 +47,8 @@ class KeySet:
         grid_spacing_mm, grid_depth_step_mm: the paper's stored grid of taps over the workspace (the
             continuous tasks' dataset backend: :class:`tactile_braille.datasets.procedures.GridTaps`).
         typing_sequences: the typing evaluation's sequences: None, every permutation of the keys;
-            a number, that many random permutations (:func:`tactile_braille.evaluation.protocol.paper_sequences`).
+            a number, that many random permutations
+            (:func:`tactile_braille.evaluation.protocol.paper_sequences`).
         types_sentences: the keys type text (A-Z and SPACE): the typing evaluation also types sentences.
     """
 
@@ -133,7 +134,8 @@ class RegisteredTask:
     @property
     def vector_entry_point(self) -> str:
         """The batched environment class of the action kind, by its import path."""
-        return f"tactile_braille.envs.vector:Vector{'Continuous' if self.continuous else 'Discrete'}BrailleEnv"
+        kind = "Continuous" if self.continuous else "Discrete"
+        return f"tactile_braille.envs.vector:Vector{kind}BrailleEnv"
 
 
 REGISTERED_TASKS: tuple[RegisteredTask, ...] = (

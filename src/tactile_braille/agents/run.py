@@ -34,11 +34,12 @@ CHECKPOINT_FILE = "checkpoint.pt"
 PROGRESS_FILE = "progress.csv"
 PROGRESS_FIELDS = (
     "epoch", "env_steps", "updates", "train/episodes", "train/episodic_return", "test/episodic_return",
-    "test/episode_length", "test/success_rate", "losses/q_loss", "losses/q_values", "losses/qf_loss",
-    "losses/actor_loss", "losses/alpha", "losses/entropy", "losses/inverse_loss", "losses/pressed_key_loss",
-    "losses/reader_loss", "charts/labelled_frames", "losses/locator_loss", "charts/located_pairs",
-    "charts/SPS", "time_s",
+    "test/episode_length", "test/success_rate",
 )  # fmt: skip
+"""The columns every run's ``progress.csv`` starts with; what the agent's updates return (``losses/...``,
+``charts/...``) follows, in the order first logged, then :data:`TIMING_FIELDS`."""
+TIMING_FIELDS = ("charts/SPS", "time_s")
+"""The last columns: environment steps per second of training, and the epoch's seconds."""
 
 
 @dataclass
@@ -404,7 +405,9 @@ def append_progress(path: Path, row: dict) -> None:
         with open(path, newline="") as handle:
             rows = [r for r in csv.DictReader(handle) if int(r["epoch"]) < row["epoch"]]
     rows.append(row)
+    logged = dict.fromkeys(name for logged_row in rows for name in logged_row)
+    fields = [*PROGRESS_FIELDS, *(n for n in logged if n not in (*PROGRESS_FIELDS, *TIMING_FIELDS)), *TIMING_FIELDS]
     with atomic_path(path) as temporary, open(temporary, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=PROGRESS_FIELDS, restval="")
+        writer = csv.DictWriter(handle, fieldnames=fields, restval="")
         writer.writeheader()
         writer.writerows(rows)

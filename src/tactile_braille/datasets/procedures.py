@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from tactile_braille._tasks import KEY_SETS
 from tactile_braille.keyboard.calibration import RIG_TAP_OFFSET_MM, work_frame_origin_mm
 from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout, key_set
 
@@ -123,8 +124,9 @@ MAX_GRID_TAPS = 1_000_000
 class GridTaps:
     """A dense grid of taps over a task's work frame, at several depths.
 
-    The paper's grids: alphabet 3 mm in x and y over x in [-30, 30],
-    y in [-90, 90] and tap depths 0..6 mm in 1 mm steps; arrows 1 mm over
+    The paper's grids (each key set's ``grid_spacing_mm``, ``grid_depth_step_mm`` and
+    ``workspace_mm``, :data:`~tactile_braille._tasks.KEY_SETS`): alphabet 3 mm in x and y over x in
+    [-30, 30], y in [-90, 90] and tap depths 0..6 mm in 1 mm steps; arrows 1 mm over
     x in [-20, 0], y in [-20, 20] and 0..6 mm in 0.5 mm steps. Tap depths are
     the original's (the rig adds a constant 2 mm). Work frames sit where the
     calibration placed the real rig's (``CALIBRATED_FRAMES``); taps are made
@@ -145,24 +147,20 @@ class GridTaps:
     y_range_mm: tuple[float, float] | None = None
     max_tap_depth_mm: float = 6.0
 
-    _PAPER = {  # noqa: RUF012 - class constant
-        "alphabet": {"spacing_mm": 3.0, "depth_step_mm": 1.0, "x": (-30.0, 30.0), "y": (-90.0, 90.0)},
-        "arrows": {"spacing_mm": 1.0, "depth_step_mm": 0.5, "x": (-20.0, 0.0), "y": (-20.0, 20.0)},
-    }
-
     def __post_init__(self) -> None:
-        if self.keys not in self._PAPER:
-            raise ValueError(f"grid keys must be one of {sorted(self._PAPER)}, got {self.keys!r}")
-        paper = self._PAPER[self.keys]
+        if self.keys not in KEY_SETS:
+            raise ValueError(f"grid keys must be one of {sorted(KEY_SETS)}, got {self.keys!r}")
+        paper = KEY_SETS[self.keys]
+        paper_x, paper_y = paper.workspace_mm
 
         def pick(value, default):
             return default if value is None else value
 
         resolved = {
-            "spacing_mm": pick(self.spacing_mm, paper["spacing_mm"]),
-            "depth_step_mm": pick(self.depth_step_mm, paper["depth_step_mm"]),
-            "x_range_mm": tuple(pick(self.x_range_mm, paper["x"])),
-            "y_range_mm": tuple(pick(self.y_range_mm, paper["y"])),
+            "spacing_mm": pick(self.spacing_mm, paper.grid_spacing_mm),
+            "depth_step_mm": pick(self.depth_step_mm, paper.grid_depth_step_mm),
+            "x_range_mm": tuple(pick(self.x_range_mm, paper_x)),
+            "y_range_mm": tuple(pick(self.y_range_mm, paper_y)),
         }
         for name in ("spacing_mm", "depth_step_mm"):
             if not resolved[name] > 0:
@@ -213,7 +211,7 @@ class GridTaps:
         xs, ys, depths = self.axes
         i, rest = divmod(index, len(ys) * len(depths))
         j, k = divmod(rest, len(depths))
-        origin_x, origin_y = work_frame_origin_mm(self.keys)
+        origin_x, origin_y = work_frame_origin_mm(KEY_SETS[self.keys].work_frame)
         return TapSpec(
             index,
             xs[i] + origin_x,

@@ -14,10 +14,9 @@ from tactile_braille.envs.backends import DatasetBackend, RigBackend
 from tactile_braille.envs.core import BatchedBraille, compute_reward
 from tactile_braille.envs.rendering import top_view
 from tactile_braille.envs.tasks import Task
+from tactile_braille.envs.world import check_world
 from tactile_braille.rigs.base import Rig
 from tactile_braille.sensor.config import sensor_preset
-
-BACKENDS = ("dataset", "render", "rig")
 
 
 def make_backend(
@@ -28,10 +27,9 @@ def make_backend(
     sensor: str,
     frame_noise: tuple[float, float] | None = None,
 ):
-    """Build the backend called ``backend`` for ``task`` (``frame_noise``: see :class:`BrailleEnv`)."""
-    if frame_noise is not None and backend != "render":
-        raise ValueError(f"frame_noise randomises the live renderer's work frame: use backend='render', "
-                         f"not {backend!r}")  # fmt: skip
+    """Build the backend called ``backend`` for ``task`` (``frame_noise``: see :class:`BrailleEnv`), one of
+    :data:`~tactile_braille.envs.world.BACKENDS` (both as :func:`~tactile_braille.envs.world.check_world`
+    accepts them)."""
     if backend == "dataset":
         return DatasetBackend(task, dataset, sensor=sensor)
     if backend == "render":
@@ -40,11 +38,9 @@ def make_backend(
         if frame_noise is None:
             return RigBackend(VirtualRig(sensor=sensor))
         return RigBackend(_random_frame_rig(task, sensor, frame_noise))
-    if backend == "rig":
-        if rig is None:
-            raise ValueError("backend='rig' needs a rig (rig=...)")
-        return RigBackend(rig)
-    raise ValueError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
+    if rig is None:  # backend == "rig"
+        raise ValueError("backend='rig' needs a rig (rig=...)")
+    return RigBackend(rig)
 
 
 def _random_frame_rig(task: Task, sensor: str, frame_noise: tuple[float, float]):
@@ -52,8 +48,6 @@ def _random_frame_rig(task: Task, sensor: str, frame_noise: tuple[float, float])
     from tactile_braille.rigs.miscalibrated import RandomFrameRig, room_needed_mm, with_room
     from tactile_braille.rigs.virtual import VirtualRig
 
-    if len(frame_noise) != 2:
-        raise ValueError(f"frame_noise is (max offset in mm, max rotation in degrees), got {frame_noise!r}")
     offset, rotation = frame_noise
     inner = VirtualRig(sensor=sensor)
     room = room_needed_mm(inner.workspace, task.frame_origin_mm, offset, rotation)
@@ -85,6 +79,8 @@ class BrailleEnv(gym.Env):
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
+        check_world(self.continuous, backend, edges=edges, tap_depth=tap_depth, key_grid=key_grid,
+                    frame_noise=frame_noise)  # fmt: skip
         self.task = Task(keys=keys, continuous=self.continuous, grid=key_grid)
         self._dome_radius_mm = sensor_preset(sensor).dome_diameter_mm / 2
         self._core = BatchedBraille(

@@ -17,6 +17,7 @@ from tactile_braille.envs.tasks import (
     RESET_TAP_DEPTH_MM,
     Task,
 )
+from tactile_braille.envs.world import EDGES, TAP_DEPTHS, WORLD_RULES  # noqa: F401 - re-exported
 from tactile_braille.keyboard.layout import NONE_KEY, KeyboardLayout
 
 OBSERVATION_SIZE_PX = 100
@@ -29,20 +30,8 @@ x, y and tap depth in mm, as the arm reports it (docs/benchmark.md)."""
 _MOVES = np.array([(-1, 0), (1, 0), (0, -1), (0, 1), (0, 0)], dtype=np.int64)
 _PRESS = DISCRETE_ACTIONS.index("PRESS")
 
-EDGES = ("stop", "overrun")
-"""What a continuous task's workspace edge does to a move that crosses it: ``"stop"``, the sensor stops
-at the edge (the real rig's safety limits, the released robot environment); ``"overrun"``, the released
-simulator's: the commanded position runs on past the edge and only the tap is made at the nearest point
-inside, so a move back must first undo the overrun."""
-
-TAP_DEPTHS = ("commanded", "released")
-"""Which stored depth a continuous tap reads on the dataset backend: ``"commanded"``, the sample at the
-commanded depth (2-8 mm: the paper's 0-6 mm plus its constant 2 mm); ``"released"``, the released
-simulator's lookup, which compares the commanded 2-8 mm with its data's 0-6 mm labels, so every tap
-reads the sample :data:`RELEASED_DEPTH_SHIFT_MM` deeper, the deepest (8 mm) from 6 mm on."""
 RELEASED_DEPTH_SHIFT_MM = 2.0
-WORLD_RULES = ("edges", "tap_depth", "key_grid")
-"""The rules in which a world may depart from ours (the released simulator's), as ``world`` records them."""
+"""How much deeper than commanded a tap reads with ``tap_depth="released"`` (:data:`TAP_DEPTHS`)."""
 
 
 def action_effects(previous_actions: np.ndarray, continuous: bool) -> np.ndarray:
@@ -69,29 +58,22 @@ def action_effects(previous_actions: np.ndarray, continuous: bool) -> np.ndarray
 def cell_positions_mm(task: Task, layout: KeyboardLayout) -> np.ndarray:
     """(rows, columns, 2) keyboard-frame position of each cell of the discrete key grid.
 
-    Key cells sit at their key's centre (SPACE's six cells spread along the
-    bar); NONE cells continue their row's spacing, which puts some over real
-    keys (SEMICOLON, RIGHTSHIFT, ...), but they are tapped in the air (depth 0)
-    and a PRESS there presses nothing.
+    Each row of cells lies along its first key's row of the keyboard, one key pitch apart, with that
+    key's cells centred on it: a key of one cell sits at its centre, and SPACE's six cells spread along
+    the bar. NONE cells continue their row's spacing, which puts some over real keys (SEMICOLON,
+    RIGHTSHIFT, ...), but they are tapped in the air (depth 0) and a PRESS there presses nothing.
     """
     grid = task.key_grid
     positions = np.zeros((*grid.shape, 2))
     pitch = layout.pitch_mm
-    if task.keys == "arrows":
-        xs = [layout.centre_mm("UP")[0], layout.centre_mm("DOWN")[0]]
-        ys = [layout.centre_mm(k)[1] for k in ("LEFT", "DOWN", "RIGHT")]
-        for r in range(grid.shape[0]):
-            for c in range(grid.shape[1]):
-                positions[r, c] = (xs[r], ys[c])
-        return positions
-    for r in range(3):  # each row spaced from its first key (the released grid's third row starts off it)
-        first = next(c for c in range(grid.shape[1]) if grid[r, c] != NONE_KEY)
-        x0, y0 = layout.centre_mm(grid[r, first])
-        for c in range(grid.shape[1]):
-            positions[r, c] = (x0, y0 - (c - first) * pitch)
-    x_space, y_space = layout.centre_mm("SPACE")
-    for c in range(grid.shape[1]):
-        positions[3, c] = (x_space, y_space - (c - (grid.shape[1] - 1) / 2) * pitch)
+    for r, row in enumerate(grid):
+        first = next(c for c in range(len(row)) if row[c] != NONE_KEY)
+        cells = np.flatnonzero(row == row[first])
+        # A key of one cell: its own column; a key over several (SPACE): their middle.
+        anchor = first if len(cells) == 1 else (cells[0] + cells[-1]) / 2
+        x0, y0 = layout.centre_mm(row[first])
+        for c in range(len(row)):
+            positions[r, c] = (x0, y0 - (c - anchor) * pitch)
     return positions
 
 
@@ -107,6 +89,9 @@ class BatchedBraille:
             tasks' grid edges stop a move, as in the released simulator: ``"stop"`` only).
         tap_depth: which stored depth a continuous tap reads, one of :data:`TAP_DEPTHS` (``"released"``
             on the dataset backend only: it is a property of the released simulator's lookup).
+
+    The environments check ``edges`` and ``tap_depth`` against the task and the backend
+    (:func:`~tactile_braille.envs.world.check_world`) before they build one.
     """
 
     def __init__(
@@ -120,19 +105,6 @@ class BatchedBraille:
     ) -> None:
         if not isinstance(proprio, bool | np.bool_):
             raise TypeError(f"proprio must be True or False, got {proprio!r}")
-        if edges not in EDGES:
-            raise ValueError(f"edges must be one of {EDGES}, got {edges!r}")
-        if edges != "stop" and not task.continuous:
-            raise ValueError(
-                f"edges={edges!r} is for the continuous tasks: a discrete move off the key grid stays put"
-            )
-        if tap_depth not in TAP_DEPTHS:
-            raise ValueError(f"tap_depth must be one of {TAP_DEPTHS}, got {tap_depth!r}")
-        if tap_depth != "commanded" and not (task.continuous and getattr(backend, "name", None) == "dataset"):
-            raise ValueError(
-                f"tap_depth={tap_depth!r} is the released simulator's lookup of the continuous tasks' "
-                "stored grid: use it with a continuous task on the dataset backend"
-            )
         self.edges, self.tap_depth = edges, tap_depth
         self._depth_shift_mm = RELEASED_DEPTH_SHIFT_MM if tap_depth == "released" else 0.0
         self.task = task

@@ -1,8 +1,8 @@
-"""The four braille tasks as data: key sets, key grids, action bounds, work frames.
+"""A braille task: a key set's row of data (:data:`~tactile_braille._tasks.KEY_SETS`) and an action kind.
 
 Each environment is a ``Task`` (what to type, how the sensor moves) played on
-a backend (where the tactile images come from). The numbers are the paper's:
-see ``docs/environments.md``.
+a backend (where the tactile images come from). The numbers are the paper's,
+in the key sets' table: see ``docs/environments.md``.
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tactile_braille._registration import MAX_EPISODE_STEPS  # noqa: F401 - re-exported
+from tactile_braille._tasks import KEY_SETS, MAX_EPISODE_STEPS, KeySet  # noqa: F401 - re-exported
+from tactile_braille.envs.world import GRIDS, check_key_grid  # noqa: F401 - GRIDS re-exported
 from tactile_braille.keyboard.calibration import RIG_TAP_OFFSET_MM, work_frame_origin_mm
-from tactile_braille.keyboard.layout import NONE_KEY, key_set
 
 DISCRETE_ACTIONS: tuple[str, ...] = ("UP", "DOWN", "LEFT", "RIGHT", "PRESS")
 """Discrete actions: move to the neighbouring cell of the key grid, or press."""
@@ -29,33 +29,14 @@ PRESS_DEPTH_MM = 8.0
 RESET_TAP_DEPTH_MM = 4.0
 """Depth of the tap that gives the first observation of a continuous episode."""
 
-_G = NONE_KEY
 KEY_GRIDS: dict[str, tuple[tuple[str, ...], ...]] = {
-    "arrows": ((_G, "UP", _G), ("LEFT", "DOWN", "RIGHT")),
-    "alphabet": (
-        tuple("QWERTYUIOP"),
-        (*"ASDFGHJKL", _G),
-        (*"ZXCVBNM", _G, _G, _G),
-        (_G, _G, *(["SPACE"] * 6), _G, _G),
-    ),
+    name: row.key_grids["rig"] for name, row in KEY_SETS.items()
 }
-"""The discrete tasks' key grids (the original robot's): NONE cells are off the keys."""
-
-GRIDS = ("rig", "released")
-"""The discrete tasks' key grids by name: ``"rig"``, the original robot's (:data:`KEY_GRIDS`: the
-alphabet's third row starts under A), and ``"released"``, the released simulator's
-(:data:`RELEASED_KEY_GRIDS`: that row one column right, Z under S); the arrows' grid is the same in
-both."""
+"""The discrete tasks' key grids (the original robot's), by key set: NONE cells are off the keys."""
 RELEASED_KEY_GRIDS: dict[str, tuple[tuple[str, ...], ...]] = {
-    **KEY_GRIDS,
-    "alphabet": (
-        tuple("QWERTYUIOP"),
-        (*"ASDFGHJKL", _G),
-        (_G, *"ZXCVBNM", _G, _G),
-        (_G, _G, *(["SPACE"] * 6), _G, _G),
-    ),
+    name: row.key_grids["released"] for name, row in KEY_SETS.items()
 }
-"""The released simulator's key grids (``envs/sim/disc_sim_braille_env/mock_kb.py``)."""
+"""The released simulator's key grids (``envs/sim/disc_sim_braille_env/mock_kb.py``), by key set."""
 
 
 @dataclass(frozen=True)
@@ -63,9 +44,11 @@ class Task:
     """What to type and how the sensor may move.
 
     Attributes:
-        keys: key set name (``"arrows"`` or ``"alphabet"``).
+        keys: key set name, a key of :data:`~tactile_braille._tasks.KEY_SETS` (``"arrows"``,
+            ``"alphabet"``).
         continuous: continuous (dx, dy, depth) actions instead of grid moves.
-        grid: the discrete tasks' key grid, one of :data:`GRIDS` (``"rig"``: the robot's).
+        grid: the discrete tasks' key grid, one of :data:`~tactile_braille.envs.world.GRIDS`
+            (``"rig"``: the robot's).
     """
 
     keys: str
@@ -73,34 +56,34 @@ class Task:
     grid: str = "rig"
 
     def __post_init__(self) -> None:
-        if self.keys not in KEY_GRIDS:
-            raise ValueError(f"keys must be one of {sorted(KEY_GRIDS)}, got {self.keys!r}")
-        if self.grid not in GRIDS:
-            raise ValueError(f"key_grid must be one of {GRIDS}, got {self.grid!r}")
-        if self.grid != "rig" and self.continuous:
-            raise ValueError(
-                f"key_grid={self.grid!r} is the discrete tasks': a continuous task moves over the keyboard"
-            )
+        if self.keys not in KEY_SETS:
+            raise ValueError(f"keys must be one of {sorted(KEY_SETS)}, got {self.keys!r}")
+        check_key_grid(self.grid, self.continuous)
+
+    @property
+    def key_set(self) -> KeySet:
+        """The key set's row of data."""
+        return KEY_SETS[self.keys]
 
     @property
     def goal_keys(self) -> tuple[str, ...]:
         """The keys a goal is drawn from, in one-hot order."""
-        return key_set(self.keys)
+        return self.key_set.keys
 
     @property
     def key_grid(self) -> np.ndarray:
         """(rows, columns) array of key names of the discrete grid."""
-        return np.array((RELEASED_KEY_GRIDS if self.grid == "released" else KEY_GRIDS)[self.keys])
+        return np.array(self.key_set.key_grids[self.grid])
 
     @property
     def max_move_mm(self) -> float:
-        """Bound of a continuous move in x and y: 10 mm (arrows) or 20 mm (alphabet)."""
-        return 10.0 if self.keys == "arrows" else 20.0
+        """Bound of a continuous move in x and y (10 mm on the arrows, 20 on the alphabet)."""
+        return self.key_set.max_move_mm
 
     @property
     def workspace_mm(self) -> tuple[tuple[float, float], tuple[float, float]]:
         """Continuous workspace (x, y) in the task's work frame."""
-        return ((-20.0, 0.0), (-20.0, 20.0)) if self.keys == "arrows" else ((-30.0, 30.0), (-90.0, 90.0))
+        return self.key_set.workspace_mm
 
     @property
     def depth_range_mm(self) -> tuple[float, float]:
@@ -110,7 +93,7 @@ class Task:
     @property
     def frame_origin_mm(self) -> tuple[float, float]:
         """Keyboard-frame position of the continuous work frame's origin."""
-        return work_frame_origin_mm(self.keys)
+        return work_frame_origin_mm(self.key_set.work_frame)
 
     @property
     def action_size(self) -> int:

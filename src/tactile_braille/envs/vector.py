@@ -29,6 +29,7 @@ from tactile_braille.datasets.store import TactileDataset
 from tactile_braille.envs.backends import DatasetBackend, RigBackend
 from tactile_braille.envs.core import BatchedBraille, compute_reward
 from tactile_braille.envs.tasks import MAX_EPISODE_STEPS, Task
+from tactile_braille.envs.world import check_world
 from tactile_braille.rigs.virtual import VirtualRig
 
 VECTOR_BACKENDS = ("dataset", "render")
@@ -84,6 +85,7 @@ class VectorBrailleEnv(VectorEnv):
             raise ValueError(f"the vectorised environment runs on the {choices} backend, not {backend!r}")
         if num_envs < 1:
             raise ValueError(f"num_envs must be at least 1, got {num_envs}")
+        check_world(self.continuous, backend, edges=edges, tap_depth=tap_depth, key_grid=key_grid)
         self.num_envs = int(num_envs)
         self.task = Task(keys=keys, continuous=self.continuous, grid=key_grid)
         if backend == "dataset":

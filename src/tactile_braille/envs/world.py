@@ -46,10 +46,6 @@ the arrows' grid is the same in both."""
 WORLD_RULES = ("edges", "tap_depth", "key_grid")
 """The rules in which a world may depart from ours (the released simulator's), as ``world`` records them."""
 
-MAX_FRAME_NOISE_DEG = 30.0
-"""The largest work-frame turn ``frame_noise`` may ask for
-(:data:`~tactile_braille.rigs.miscalibrated.MAX_FRAME_ROTATION_DEG`, the rigs' yaw limit less a tap's)."""
-
 
 def check_world(
     continuous: bool | None,
@@ -72,8 +68,7 @@ def check_world(
         tap_depth: one of :data:`TAP_DEPTHS`; ``"released"`` on a continuous task on the dataset backend
             only (it is the released simulator's lookup of the stored grid).
         key_grid: one of :data:`GRIDS`; ``"released"`` on a discrete task only.
-        frame_noise: None, or ``(mm, degrees)`` on the render backend: both >= 0, degrees at most
-            :data:`MAX_FRAME_NOISE_DEG`.
+        frame_noise: None, or ``(mm, degrees)`` on the render backend (:func:`check_frame_noise`).
         task: how messages name the task (an environment id), if known.
 
     Raises:
@@ -97,8 +92,7 @@ def check_world(
             f"stored grid, on the dataset backend: set tap_depth='commanded'{where} on the {backend} backend"
         )
     check_key_grid(key_grid, continuous, task)
-    if frame_noise is not None:
-        _check_frame_noise(frame_noise, backend)
+    check_frame_noise(frame_noise, backend)
 
 
 def check_key_grid(key_grid: str, continuous: bool | None, task: str | None = None) -> None:
@@ -113,14 +107,20 @@ def check_key_grid(key_grid: str, continuous: bool | None, task: str | None = No
         )
 
 
-def _check_frame_noise(frame_noise: Sequence[float], backend: str) -> None:
+def check_frame_noise(frame_noise: Sequence[float] | None, backend: str) -> None:
+    """Refuse a work-frame error that is not ``(mm, degrees)``, both finite and >= 0 and degrees at most
+    the rigs' :data:`~tactile_braille.rigs.miscalibrated.MAX_FRAME_ROTATION_DEG`, or one asked off the
+    render backend (None: no error, accepted everywhere)."""
+    if frame_noise is None:
+        return
+    from tactile_braille.rigs.miscalibrated import MAX_FRAME_ROTATION_DEG  # the rigs: only when asked
+
     noise = tuple(frame_noise)
-    if len(noise) != 2 or not all(
-        isinstance(value, int | float) and math.isfinite(value) and value >= 0 for value in noise
-    ) or noise[1] > MAX_FRAME_NOISE_DEG:
+    finite = all(isinstance(value, int | float) and math.isfinite(value) and value >= 0 for value in noise)
+    if len(noise) != 2 or not finite or noise[1] > MAX_FRAME_ROTATION_DEG:
         raise ValueError(
-            f"frame_noise is (mm, degrees), both >= 0 and finite, degrees at most {MAX_FRAME_NOISE_DEG:g}, "
-            f"got {frame_noise}"
+            f"frame_noise is (mm, degrees), both >= 0 and finite, degrees at most "
+            f"{MAX_FRAME_ROTATION_DEG:g}, got {frame_noise}"
         )
     if backend != "render":
         raise ValueError(

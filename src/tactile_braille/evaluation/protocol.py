@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 import numpy as np
 
+from tactile_braille._tasks import KEY_SETS
 from tactile_braille.agents.rollout import run_episode
-from tactile_braille.keyboard.layout import ALPHABET_KEYS, ARROW_KEYS
+from tactile_braille.keyboard.layout import ALPHABET_KEYS
 
 OTHER, NONE = "OTHER", "NONE"
 SENTENCES = (
@@ -45,14 +46,18 @@ SENTENCES = (
 """Pangrams and ordinary sentences for the alphabet tasks (spaces typed as SPACE)."""
 
 
-def paper_sequences(keys: str, count: int = 10, seed: int = 1) -> list[tuple[str, ...]]:
-    """The evaluation sequences: all 24 arrow permutations, or ``count`` permutations of the alphabet."""
-    if keys == "arrows":
-        return list(itertools.permutations(ARROW_KEYS))
-    if keys == "alphabet":
-        rng = np.random.default_rng(seed)
-        return [tuple(ALPHABET_KEYS[i] for i in rng.permutation(len(ALPHABET_KEYS))) for _ in range(count)]
-    raise ValueError(f"keys must be 'arrows' or 'alphabet', got {keys!r}")
+def paper_sequences(keys: str, count: int | None = None, seed: int = 1) -> list[tuple[str, ...]]:
+    """The evaluation sequences of key set ``keys``, as its row of :data:`~tactile_braille._tasks.KEY_SETS`
+    says (``typing_sequences``): every permutation of its keys (the arrows' 24), or ``count`` random
+    permutations drawn with ``seed`` (None: the row's number, the alphabet's 10)."""
+    if keys not in KEY_SETS:
+        raise ValueError(f"keys must be one of {sorted(KEY_SETS)}, got {keys!r}")
+    row = KEY_SETS[keys]
+    if row.typing_sequences is None:
+        return list(itertools.permutations(row.keys))
+    rng = np.random.default_rng(seed)
+    count = row.typing_sequences if count is None else count
+    return [tuple(row.keys[i] for i in rng.permutation(len(row.keys))) for _ in range(count)]
 
 
 def text_keys(text: str) -> tuple[str, ...]:

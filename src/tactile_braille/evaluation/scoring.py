@@ -30,7 +30,9 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 import gymnasium as gym
 import numpy as np
 
+from tactile_braille._tasks import KEY_SETS
 from tactile_braille._version import __version__
+from tactile_braille.agents.config import TRACKS
 from tactile_braille.envs.core import _MOVES, _PRESS, PROPRIO_KEY
 from tactile_braille.envs.registry import task_name, task_of
 from tactile_braille.envs.tasks import Task
@@ -42,8 +44,6 @@ from tactile_braille.evaluation.protocol import (
     type_sequences,
 )
 
-TRACKS = ("tactile", "proprio")
-"""The benchmark's tracks (docs/benchmark.md); a report names the one its policy competes in."""
 FINGERPRINT_FORMAT = 1
 """Raised whenever what the fingerprint covers changes, so that old and new ones never match."""
 
@@ -280,8 +280,8 @@ def evaluate_policy(
     docs/benchmark.md); a ``proprio`` policy's observations also carry the
     arm's pose (``sensor_pose``), a ``tactile`` one's do not. ``env``: an environment of the task to type in,
     instead of one made from ``backend``, ``dataset`` and
-    ``max_episode_steps``. Alphabet tasks also type :data:`SENTENCES` unless
-    ``sentences`` is false.
+    ``max_episode_steps``. Tasks whose keys type text (the alphabet's: their key set's
+    ``types_sentences``) also type :data:`SENTENCES` unless ``sentences`` is false.
     """
     task_id = task if "/" in task else f"tactile_braille/{task}"
     keys = _task_keys(task_id)
@@ -319,7 +319,7 @@ def evaluate_policy(
         touch_optimum=None if task_of(task_id).continuous else touch_optimum(keys, sequences, protocol, grid),
         typing_bound=bound,
     )  # fmt: skip
-    if keys == "alphabet" and sentences:
+    if KEY_SETS[keys].types_sentences and sentences:
         report.sentences = type_sentences(agent, env, seed + 1_000)
     return report
 

@@ -26,13 +26,16 @@ from functools import cached_property
 
 import numpy as np
 
+from tactile_braille._tasks import KEY_SETS
+
 KEY_PITCH_MM = 19.0
 """Distance between neighbouring key centres (1 key unit)."""
 
-ARROW_KEYS: tuple[str, ...] = ("UP", "DOWN", "LEFT", "RIGHT")
-"""Key set of the arrow tasks."""
+ARROW_KEYS: tuple[str, ...] = KEY_SETS["arrows"].keys
+"""Key set of the arrow tasks: UP, DOWN, LEFT, RIGHT (each key set is a row of
+:data:`~tactile_braille._tasks.KEY_SETS`)."""
 
-ALPHABET_KEYS: tuple[str, ...] = (*"ABCDEFGHIJKLMNOPQRSTUVWXYZ", "SPACE")
+ALPHABET_KEYS: tuple[str, ...] = KEY_SETS["alphabet"].keys
 """Key set of the alphabet tasks: A-Z plus SPACE (27 keys)."""
 
 ALL_TASK_KEYS: tuple[str, ...] = ALPHABET_KEYS + ARROW_KEYS
