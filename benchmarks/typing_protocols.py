@@ -47,7 +47,7 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for task in TASKS:
         env = gym.make(f"tactile_braille/{task}")
-        sequences = paper_sequences("arrows" if "Arrows" in task else "alphabet")
+        sequences = paper_sequences(env.unwrapped.task.keys)
         oracle = PoseScript(env)
         steps, accuracy = {}, []
         for protocol in ("paper", "released"):

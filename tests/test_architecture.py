@@ -13,7 +13,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "tactile_braille"
 
 LAYERS = {
-    "_io": 0, "_version": 0, "_registration": 0, "_figures": 0,
+    "_io": 0, "_version": 0, "_registration": 0, "_tasks": 0, "_figures": 0,
     "keyboard": 1,
     "sensor": 2,
     "rigs": 3,

@@ -35,10 +35,17 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal, Union
 
-Backend = Literal["dataset", "render", "rig"]
-Edges = Literal["stop", "overrun"]
-TapDepth = Literal["commanded", "released"]
-KeyGrid = Literal["rig", "released"]
+# The world's value sets and rules are the environments' (torch-free).
+from tactile_braille.envs.world import (
+    BACKENDS,  # noqa: F401 - re-exported for the command line
+    Backend,
+    Edges,
+    KeyGrid,
+    TapDepth,
+    check_frame_noise,
+    check_world,
+)
+
 Precision = Literal["fp32", "bf16"]
 RelabelRule = Literal["paper", "all"]
 TouchInputs = Literal["features", "readout"]
@@ -54,7 +61,6 @@ PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
 RELABELLING: tuple[str, ...] = typing.get_args(RelabelRule)
 TOUCH_INPUTS: tuple[str, ...] = typing.get_args(TouchInputs)
 TOUCH_LABELS: tuple[str, ...] = typing.get_args(TouchLabels)
-BACKENDS: tuple[str, ...] = typing.get_args(Backend)
 TRACKS: tuple[str, ...] = typing.get_args(Track)
 """The benchmark's tracks (docs/benchmark.md). ``tactile``: the paper's rules, the agent and every loss
 see only the observation dictionary and the reward. ``proprio``: also what a calibrated robot knows, the
@@ -736,14 +742,7 @@ class TrainConfig:
             )
 
     def _check_frame_noise(self) -> None:
-        noise = self.frame_noise
-        if noise is None:
-            return
-        if len(noise) != 2 or min(noise) < 0 or noise[1] > 30:
-            raise ValueError(f"frame_noise is (mm, degrees), both >= 0, degrees at most 30, got {noise}")
-        if self.backend != "render":
-            raise ValueError(f"frame_noise randomises the live renderer's work frame: set backend='render' "
-                             f"(--backend render), not {self.backend!r}")  # fmt: skip
+        check_frame_noise(self.frame_noise, self.backend)  # the environments' rule
 
     def _check_task(self) -> None:
         from tactile_braille.envs.registry import task_of  # the environments' registry, not torch
@@ -758,24 +757,10 @@ class TrainConfig:
                 f"keep_pose_fraction starts episodes where the braille tasks' sensor was (their reset "
                 f"option keep_pose), got {self.task}"
             )
-        if self.edges != "stop" and (task is None or not task.continuous):
-            raise ValueError(
-                f"edges={self.edges!r} is the continuous braille tasks' (a discrete move off the key "
-                f"grid stays put): set edges='stop' for {self.task}"
-            )
-        if self.tap_depth != "commanded" and (
-            task is None or not task.continuous or self.backend != "dataset"
-        ):
-            raise ValueError(
-                f"tap_depth={self.tap_depth!r} is the released simulator's lookup of the continuous "
-                f"braille tasks' stored grid: set tap_depth='commanded' for {self.task} on the "
-                f"{self.backend} backend"
-            )
-        if self.key_grid != "rig" and (task is None or task.continuous):
-            raise ValueError(
-                f"key_grid={self.key_grid!r} is the discrete braille tasks' grid: set key_grid='rig' "
-                f"for {self.task}"
-            )
+        check_world(  # the environments' rules for edges, tap_depth and key_grid, as they will check them
+            None if task is None else task.continuous, self.backend,
+            edges=self.edges, tap_depth=self.tap_depth, key_grid=self.key_grid, task=self.task,
+        )  # fmt: skip
         if self.final_press and task is None:
             raise ValueError(f"final_press ends episodes with the braille tasks' press, got {self.task}")
         if self.touch.labels == "observation" and task is None:

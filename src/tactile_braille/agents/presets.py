@@ -42,42 +42,77 @@ encoder learns from the arm's pose and the key layout) is ``proprio``.
 
 from __future__ import annotations
 
+import copy
+from dataclasses import dataclass, field
 from typing import Any
 
 from tactile_braille.agents.config import TrainConfig, differences, replace_settings
 from tactile_braille.agents.registry import agent_spec
 from tactile_braille.envs.registry import task_of
+from tactile_braille.envs.tasks import Task
 
 PRESETS = ("paper", "released", "fast", "fast-tactile")
 PRESET_TRACKS = {"paper": "tactile", "released": "tactile", "fast": "proprio", "fast-tactile": "tactile"}
 """The track each preset competes in (docs/benchmark.md): the paper's agents and ``fast-tactile`` learn
 from touch alone; ``fast`` also from the arm's pose and the calibrated key layout."""
 
-PAPER_EPOCHS = {
-    ("discrete", "arrows"): 25,
-    ("discrete", "alphabet"): 100,
-    ("continuous", "arrows"): 100,
-    ("continuous", "alphabet"): 2000,
-}
-"""Epochs of the original runs (sim), by (action kind, key set)."""
 
-FAST_EPOCHS = {
-    ("discrete", "arrows"): 8,
-    ("discrete", "alphabet"): 25,
-    ("continuous", "arrows"): 30,
-    ("continuous", "alphabet"): 90,
-}
-"""Epochs of the ``fast`` preset: a third of the paper's convergence epochs or less, and the
-90-epoch budget for the continuous alphabet."""
 
-FAST_TACTILE_EPOCHS = {
-    ("discrete", "arrows"): 8,
-    ("discrete", "alphabet"): 25,
-    ("continuous", "arrows"): 30,
-    ("continuous", "alphabet"): 290,
-}
-"""Epochs of the ``fast-tactile`` preset: ``fast``'s, and on the continuous alphabet a third of the
-paper's 872 convergence epochs (issue 21's target)."""
+@dataclass(frozen=True)
+class TaskPresets:
+    """What the presets set on one registered braille task: a row of :data:`TASK_PRESETS`.
+
+    Attributes:
+        paper_epochs: epochs of the original runs (sim): the ``paper`` and ``released`` presets'.
+        fast_epochs: the ``fast`` preset's: a third of the paper's convergence epochs or less, and the
+            90-epoch budget for the continuous alphabet.
+        fast_tactile_epochs: the ``fast-tactile`` preset's: ``fast``'s, and on the continuous alphabet a
+            third of the paper's 872 convergence epochs (issue 21's target).
+        fast: what ``fast`` sets on this task beyond what it sets on every task (:func:`fast_changes`;
+            a group as a dict of its settings).
+        planner_epochs: the planner's epochs (``fast-tactile``) where they are not
+            ``fast_tactile_epochs``: on the continuous alphabet twice the first epoch at 0.95 of its
+            tuning seed (30), where ``fast-tactile``'s 290 are the issue's target for the paper's 872.
+        planner_agent: the planner's settings on this task beyond its action kind's
+            (:func:`planner_changes` says why).
+    """
+
+    paper_epochs: int
+    fast_epochs: int
+    fast_tactile_epochs: int
+    fast: dict[str, Any]
+    planner_epochs: int | None = None
+    planner_agent: dict[str, Any] = field(default_factory=dict)
+
+
+_ARROWS_FAST = {"start_steps": 200, "touch": {"refit_every": 200, "refits": 4}}
+TASK_PRESETS: dict[str, TaskPresets] = {
+    "tactile_braille/DiscreteArrows-v0": TaskPresets(
+        paper_epochs=25, fast_epochs=8, fast_tactile_epochs=8, fast=_ARROWS_FAST,
+    ),
+    "tactile_braille/DiscreteAlphabet-v0": TaskPresets(
+        paper_epochs=100, fast_epochs=25, fast_tactile_epochs=25,
+        fast={"start_steps": 500, "touch": {"refit_every": 250, "refits": 16}},
+    ),
+    "tactile_braille/ContinuousArrows-v0": TaskPresets(
+        paper_epochs=100, fast_epochs=30, fast_tactile_epochs=30, fast=_ARROWS_FAST,
+        planner_agent={"press_reading": 0.8, "first_press": False},
+    ),
+    "tactile_braille/ContinuousAlphabet-v0": TaskPresets(
+        paper_epochs=2000, fast_epochs=90, fast_tactile_epochs=290, planner_epochs=60,
+        fast={
+            "start_steps": 500,
+            # Reading a letter at any offset takes many more taps than at key centres: refit all along.
+            "touch": {"refit_every": 1000, "refits": 20},
+            # The critics also see the sensor pose the arm reports: judging a move is easy from where
+            # the sensor is, and the actor, which acts on touch alone, learns from that judgement.
+            "agent": {"critic_pose": True},
+        },
+        planner_agent={"move": 0.9, "lost_value": 0.0},
+    ),
+}  # fmt: skip
+"""The presets' numbers for each registered braille task (:data:`~tactile_braille._tasks.REGISTERED_TASKS`),
+by id."""
 
 RELEASED_CHANGES: dict[str, dict[str, Any]] = {
     # The target moves 99.5 % of the way to the online network once per epoch (its `polyak: 0.005` is
@@ -127,12 +162,13 @@ def paper_changes(task: str, algo: str) -> dict[str, Any]:
     25-step episodes, on the continuous tasks the released simulator's workspace edge and depth lookup
     (``edges="overrun"``, ``tap_depth="released"``, since session 22), and TD3's noise in the units of
     the released code (mm)."""
-    changes: dict[str, Any] = {"epochs": PAPER_EPOCHS[family(task)], "max_episode_steps": 25}
-    if family(task)[0] == "continuous":  # the released simulator, in which Table III was measured:
+    spec, presets = task_presets(task)
+    changes: dict[str, Any] = {"epochs": presets.paper_epochs, "max_episode_steps": 25}
+    if spec.continuous:  # the released simulator, in which Table III was measured:
         changes["edges"] = "overrun"  # its workspace edge, past which the commanded position runs on
         changes["tap_depth"] = "released"  # and its lookup of the stored depths, 2 mm deeper
     if algo == "td3":
-        scale = task_of(task).max_move_mm
+        scale = spec.max_move_mm
         changes["agent"] = {name: mm / scale for name, mm in TD3_NOISE_MM.items()}
     return changes
 
@@ -151,42 +187,45 @@ def released_changes(task: str, algo: str) -> dict[str, Any]:
     return changes
 
 
-def family(task: str) -> tuple[str, str]:
-    """(action kind, key set) of a braille task, read from its registration."""
-    spec = task_of(task)
-    if spec is None:
-        raise ValueError(f"no preset for task {task!r}: presets are for the braille tasks")
-    return ("continuous" if spec.continuous else "discrete"), spec.keys
+def task_presets(task: str) -> tuple[Task, TaskPresets]:
+    """The braille task of a registered id (read from its registration) and its row of
+    :data:`TASK_PRESETS`.
+
+    Raises:
+        ValueError: ``task`` is not registered, or is not one of the braille tasks the presets are for.
+    """
+    spec = task_of(task)  # raises for an unknown id
+    if spec is None or task not in TASK_PRESETS:
+        raise ValueError(
+            f"no preset for task {task!r}: presets are for the braille tasks {tuple(TASK_PRESETS)}"
+        )
+    return spec, TASK_PRESETS[task]
+
+
+def _merged(changes: dict[str, Any], more: dict[str, Any]) -> dict[str, Any]:
+    """``changes`` with ``more`` on top, a group's settings merged into the group's (a new dict)."""
+    merged = dict(changes)
+    for name, value in more.items():
+        both = isinstance(value, dict) and isinstance(merged.get(name), dict)
+        merged[name] = {**merged[name], **value} if both else copy.deepcopy(value)
+    return merged
 
 
 def fast_changes(task: str, algo: str) -> dict[str, Any]:
-    """What ``fast`` changes on top of the paper's settings, for a task and an algorithm."""
-    kind, keys = family(task)
-    arrows = keys == "arrows"
+    """What ``fast`` changes on top of the paper's settings, for a task (its row's ``fast``, on top of
+    what it sets on every task) and an algorithm."""
+    _, presets = task_presets(task)
     changes: dict[str, Any] = {
-        "epochs": FAST_EPOCHS[kind, keys],
-        "start_steps": 200 if arrows else 500,
+        "epochs": presets.fast_epochs,
         "updates_per_step": 2 if algo == "td3" else 4,
         "replay": {"relabel": "all"},
         # The agent acts on what the encoder reads (pose, key probabilities), the arm's pose and the
         # goal key's place on the calibrated layout, all in the encoder's pose coordinates: "where to go"
         # is then one function for every key, and the pose the arm reports makes it exact (issue 20).
-        "touch": {
-            "enabled": True,
-            "refit_every": 200 if arrows else 250,
-            "refits": 4 if arrows else 16,
-            "inputs": "readout",
-            "goal_positions": True,
-            "pose_inputs": True,
-        },
+        "touch": {"enabled": True, "inputs": "readout", "goal_positions": True, "pose_inputs": True},
         "agent": {"hidden": (256, 256), "batch_size": 128, "learning_rate": 1e-3, "adam_eps": 1e-8},
     }
-    if (kind, keys) == ("continuous", "alphabet"):
-        # Reading a letter at any offset takes many more taps than at key centres: refit all along.
-        changes["touch"].update(refit_every=1000, refits=20)
-        # The critics also see the sensor pose the arm reports: judging a move is easy from where the
-        # sensor is, and the actor, which acts on touch alone, learns from that judgement.
-        changes["agent"]["critic_pose"] = True
+    changes = _merged(changes, presets.fast)  # its start steps, the encoder's refits, ...
     if algo == "dqn":
         changes["agent"].update(epsilon_decay_steps=1000, loss="huber")
     if algo in ("sac", "sac_discrete"):
@@ -205,16 +244,10 @@ def fast_tactile_changes(task: str, algo: str) -> dict[str, Any]:
     if algo == "planner":
         return planner_changes(task)
     changes = fast_changes(task, algo)
-    changes["epochs"] = FAST_TACTILE_EPOCHS[family(task)]
+    changes["epochs"] = TASK_PRESETS[task].fast_tactile_epochs
     changes["touch"].update(labels="observation", pose_inputs=False)
     changes["agent"].pop("critic_pose", None)
     return changes
-
-
-PLANNER_EPOCHS = {("continuous", "alphabet"): 60}
-"""The planner's epochs where they are not :data:`FAST_TACTILE_EPOCHS`': on the continuous alphabet
-twice the first epoch at 0.95 of its tuning seed (30), where ``fast-tactile``'s 290 are the issue's
-target for the paper's 872."""
 
 
 def planner_changes(task: str) -> dict[str, Any]:
@@ -254,27 +287,25 @@ def planner_changes(task: str) -> dict[str, Any]:
     entry states; tuned on its seed 100, session 35), where a key that is not the task's reads as
     nothing too: there the plans went the same way. Not on the continuous arrows,
     where the plans seldom leave the keys (its tuning seed types as well, in 4 % more steps)."""
-    kind, keys = family(task)
+    spec, presets = task_presets(task)
+    epochs = presets.fast_tactile_epochs if presets.planner_epochs is None else presets.planner_epochs
     changes: dict[str, Any] = {
-        "epochs": PLANNER_EPOCHS.get(family(task), FAST_TACTILE_EPOCHS[family(task)]),
+        "epochs": epochs,
         "start_steps": 0,
-        "final_press": kind == "discrete",
+        "final_press": not spec.continuous,
         "updates_per_step": 1,
         "replay": {"relabel": "all"},
     }
-    if kind == "discrete":
-        changes["agent"] = {"backtrack_prior": True, "lost_value": 0.0}
-    if kind == "continuous":
-        changes["agent"] = {
+    if spec.continuous:
+        agent = {
             "sense_depth": -1 / 3,
             "explore_press": 0.8,
             "epsilon_decay_steps": 2000,
             "entry_memory": True,
         }
-        if keys == "arrows":
-            changes["agent"].update(press_reading=0.8, first_press=False)
-        if keys == "alphabet":
-            changes["agent"].update(move=0.9, lost_value=0.0)
+    else:
+        agent = {"backtrack_prior": True, "lost_value": 0.0}
+    changes["agent"] = {**agent, **presets.planner_agent}  # the arrows' press_reading, the alphabet's move
     return changes
 
 

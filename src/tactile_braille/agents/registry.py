@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import importlib.metadata
 import re
 from dataclasses import dataclass
 
@@ -131,11 +132,13 @@ def register_agent(spec: AgentSpec, replace: bool = False) -> AgentSpec:
 
 
 def agent_spec(name: str) -> AgentSpec:
-    """The registered agent ``name``.
+    """The registered agent ``name`` (an installed package's agents are loaded first, :data:`ENTRY_POINTS`).
 
     Raises:
         ValueError: no agent of that name, with the names there are.
     """
+    if name not in _REGISTRY:
+        load_entry_points()
     try:
         return _REGISTRY[name]
     except (KeyError, TypeError):
@@ -143,8 +146,31 @@ def agent_spec(name: str) -> AgentSpec:
 
 
 def agent_names() -> tuple[str, ...]:
-    """The registered agents' names, in the order they were registered."""
+    """The registered agents' names, in the order they were registered (an installed package's too)."""
+    load_entry_points()
     return tuple(_REGISTRY)
+
+
+ENTRY_POINTS = "tactile_braille.agents"
+"""The entry-point group through which an installed package brings its agents to the command line: each
+entry point names a module that registers agents when imported (``pyproject.toml``:
+``[project.entry-points."tactile_braille.agents"] my_agent = "my_package.agent"``)."""
+
+_entry_points_loaded = False
+
+
+def load_entry_points() -> None:
+    """Import the modules of the installed packages' :data:`ENTRY_POINTS` (once), so that they register
+    their agents; one that fails to import is named in the error."""
+    global _entry_points_loaded
+    if _entry_points_loaded:
+        return
+    _entry_points_loaded = True
+    for entry in importlib.metadata.entry_points(group=ENTRY_POINTS):
+        try:
+            entry.load()
+        except Exception as error:
+            raise ImportError(f"the agent entry point {entry.name!r} ({entry.value}) failed: {error}") from error
 
 
 def agent_label(name: str) -> str:

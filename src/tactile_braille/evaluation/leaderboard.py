@@ -24,6 +24,7 @@ import numpy as np
 
 from tactile_braille.agents.run import json_differences
 from tactile_braille.envs.core import WORLD_RULES
+from tactile_braille.agents.registry import agent_label
 from tactile_braille.evaluation.report import PAPER_TABLE, TASK_NAMES, TRACK_TITLES
 from tactile_braille.evaluation.results import read_result
 
@@ -181,7 +182,7 @@ _INTRO = (
 
 def _paper_rows(task: str) -> list[Row]:
     return [
-        Row(f"{PAPER_METHOD}: {algo.upper().replace('SAC_DISCRETE', 'SAC_DISC')}", "tactile", "",
+        Row(f"{PAPER_METHOD}: {agent_label(algo)}", "tactile", "",
             [accuracy], [steps], [None], paper=True)
         for (platform, name, algo), (steps, accuracy, _) in PAPER_TABLE.items()
         if platform == "sim" and name == task

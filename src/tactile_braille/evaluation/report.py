@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_braille._io import atomic_path
+from tactile_braille._tasks import REGISTERED_TASKS
 from tactile_braille.agents.config import TrainConfig, flatten
 from tactile_braille.agents.registry import PAPER_AGENTS, agent_label
 from tactile_braille.agents.report import convergence_epoch
@@ -32,10 +33,8 @@ from tactile_braille.agents.run import read_config, read_progress, run_world
 from tactile_braille.datasets.collector import GENERATOR_VERSION
 from tactile_braille.envs.registry import task_name, task_of
 
-TASK_NAMES = {
-    "DiscreteArrows-v0": "disc arrow", "DiscreteAlphabet-v0": "disc alpha",
-    "ContinuousArrows-v0": "cont arrow", "ContinuousAlphabet-v0": "cont alpha",
-}  # fmt: skip
+TASK_NAMES = {task.name: task.label for task in REGISTERED_TASKS}
+"""Each registered task's short name in the reports (the paper's Table III rows), in the paper's order."""
 PAPER_TABLE: dict[tuple[str, str, str], tuple[int, float, int]] = {
     ("sim", "DiscreteArrows-v0", "dqn"): (230, 1.0, 8),
     ("sim", "DiscreteArrows-v0", "sac_discrete"): (234, 1.0, 8),
@@ -333,7 +332,7 @@ def coverage_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     whose runs ran the preset's full epochs (the continuous alphabet: at least 100 epochs) with the
     preset's own settings, against the seeds asked for. Runs that depart from their preset, or ran an
     earlier version of it, are other rows of the results table and do not count here."""
-    from tactile_braille.agents.presets import PAPER_EPOCHS, PRESET_TRACKS, family
+    from tactile_braille.agents.presets import PRESET_TRACKS, TASK_PRESETS
 
     lines = [
         "| Table III row | preset | track | seeds run | epochs each | asked | status |",
@@ -342,7 +341,7 @@ def coverage_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     for platform, task, algo in PAPER_TABLE:
         if platform != "sim":
             continue
-        full = PAPER_EPOCHS[family(f"tactile_braille/{task}")]
+        full = TASK_PRESETS[f"tactile_braille/{task}"].paper_epochs
         seeds_asked, epochs_asked = TABLE3_SHORT_ROWS.get(task, (TABLE3_SEEDS, full))
         for preset in TABLE3_PRESETS:
             runs = [
