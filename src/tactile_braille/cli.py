@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from tactile_braille._io import LockedError
+from tactile_braille._tasks import KEY_SETS
 from tactile_braille.agents.config import BACKENDS, PRECISIONS
 from tactile_braille.agents.registry import agent_names
 from tactile_braille.agents.presets import PRESETS as TRAINING_PRESETS
@@ -609,7 +610,7 @@ def _add_collect_command(commands) -> None:
     """The ``collect`` command."""
     collect = commands.add_parser("collect", help="run a collection procedure on a rig into a dataset")
     collect.add_argument("--procedure", choices=("perturbed", "grid"), default="perturbed")
-    collect.add_argument("--keys", choices=("arrows", "alphabet", "all"), default="all")
+    collect.add_argument("--keys", choices=(*KEY_SETS, "all"), default="all")
     collect.add_argument(
         "--rig", choices=("virtual", "ur5", "simulated-ur5"), default="virtual",
         help="ur5: the real robot (--rig-config); simulated-ur5: the UR5 code path on simulated hardware",

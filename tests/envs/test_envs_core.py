@@ -615,7 +615,7 @@ def test_the_released_key_grid_puts_z_under_s_and_the_world_records_it(make):
     np.testing.assert_allclose(  # Z's cell lies at Z in both grids
         rig.unwrapped._core.cell_positions_mm[2, 0], released.unwrapped._core.cell_positions_mm[2, 1]
     )
-    with pytest.raises(ValueError, match="key_grid='released' is the discrete tasks'"):
+    with pytest.raises(ValueError, match="key_grid='released' is the discrete braille tasks' grid"):
         make("tactile_braille/ContinuousArrows-v0", key_grid="released")
     with pytest.raises(ValueError, match="key_grid must be one of"):
         make(env_id, key_grid="qwertz")
@@ -623,7 +623,7 @@ def test_the_released_key_grid_puts_z_under_s_and_the_world_records_it(make):
 
 @pytest.mark.parametrize("env_id", DISCRETE_IDS)
 def test_an_overrun_edge_is_refused_on_a_discrete_task(env_id, make):
-    with pytest.raises(ValueError, match="edges='overrun' is for the continuous tasks"):
+    with pytest.raises(ValueError, match="edges='overrun' is the continuous braille tasks'"):
         make(env_id, edges="overrun")
     with pytest.raises(ValueError, match="edges must be one of"):
         make(env_id, edges="wrap")

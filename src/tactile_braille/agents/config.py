@@ -67,33 +67,43 @@ see only the observation dictionary and the reward. ``proprio``: also what a cal
 arm's pose at each tap and the calibrated key layout."""
 
 
-def _check_hyperparameters(config) -> None:
-    """Refuse hyperparameters of a wrong type, or that no algorithm can use."""
+HYPERPARAMETER_RANGES: dict[str, tuple[str, Any]] = {
+    "batch_size": ("must be at least 1", lambda v: v >= 1),
+    "gamma": ("must be in [0, 1]", lambda v: 0.0 <= v <= 1.0),
+    "tau": ("must be in (0, 1]", lambda v: 0.0 < v <= 1.0),
+    "pressed_key": ("is a loss weight: at least 0", lambda v: v >= 0),
+    **dict.fromkeys(
+        ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps", "action_input_scale"),
+        ("must be positive", lambda v: v > 0),
+    ),
+    "hidden": ("needs at least one positive layer size", lambda v: bool(v) and min(v) >= 1),
+    **dict.fromkeys(
+        ("epsilon_decay_steps", "noise_decay_steps", "policy_delay", "schedule_interval"),
+        ("must be at least 1", lambda v: v >= 1),
+    ),
+    **dict.fromkeys(
+        ("epsilon_start", "epsilon_end", "test_epsilon", "target_entropy_ratio"),
+        ("must be in [0, 1]", lambda v: 0.0 <= v <= 1.0),
+    ),
+    **dict.fromkeys(
+        ("noise_start", "noise_end", "test_noise", "target_noise", "noise_clip"),
+        ("must not be negative", lambda v: v >= 0),
+    ),
+}
+"""The ranges of hyperparameters that mean the same in every agent that has them, by field name: what a
+value must be, and the check. :class:`AgentConfig` applies each to the fields its subclass has."""
+
+
+def _check_hyperparameters(config: AgentConfig) -> None:
+    """Refuse hyperparameters of a wrong type, or out of :data:`HYPERPARAMETER_RANGES`."""
     check_types(config)
     problems = []
-    if getattr(config, "batch_size", 1) < 1:
-        problems.append(f"batch_size must be at least 1, got {config.batch_size}")
-    if not 0.0 <= getattr(config, "gamma", 0.0) <= 1.0:
-        problems.append(f"gamma must be in [0, 1], got {config.gamma}")
-    if not 0.0 < getattr(config, "tau", 1.0) <= 1.0:
-        problems.append(f"tau must be in (0, 1], got {config.tau}")
-    if getattr(config, "pressed_key", 0.0) < 0:
-        problems.append(f"pressed_key is a loss weight: at least 0, got {config.pressed_key}")
-    for name in ("learning_rate", "alpha_learning_rate", "initial_alpha", "adam_eps", "action_input_scale"):
-        if getattr(config, name, 1.0) <= 0:
-            problems.append(f"{name} must be positive, got {getattr(config, name)}")
-    hidden = getattr(config, "hidden", (1,))
-    if not hidden or min(hidden) < 1:
-        problems.append(f"hidden needs at least one positive layer size, got {hidden}")
-    for name in ("epsilon_decay_steps", "noise_decay_steps", "policy_delay", "schedule_interval"):
-        if getattr(config, name, 1) < 1:
-            problems.append(f"{name} must be at least 1, got {getattr(config, name)}")
-    for name in ("epsilon_start", "epsilon_end", "test_epsilon", "target_entropy_ratio"):
-        if not 0.0 <= getattr(config, name, 0.0) <= 1.0:
-            problems.append(f"{name} must be in [0, 1], got {getattr(config, name)}")
-    for name in ("noise_start", "noise_end", "test_noise", "target_noise", "noise_clip"):
-        if getattr(config, name, 0.0) < 0:
-            problems.append(f"{name} must not be negative, got {getattr(config, name)}")
+    for spec in dataclasses.fields(config):
+        if spec.name in HYPERPARAMETER_RANGES:
+            rule, holds = HYPERPARAMETER_RANGES[spec.name]
+            value = getattr(config, spec.name)
+            if not holds(value):
+                problems.append(f"{spec.name} {rule}, got {value}")
     if problems:
         raise ValueError(f"{type(config).__name__}: " + "; ".join(problems))
 

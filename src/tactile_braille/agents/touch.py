@@ -6,7 +6,7 @@ key the keyboard reported). After its first ``start_steps`` (random actions,
 as in the paper) it fits a touch encoder to predict them from the image, and
 the reinforcement learner works on the frozen encoder's features: the
 updates are dense layers only, on a feature cache of the replay's images.
-Every ``touch_refit_every`` steps the encoder is refitted, from its current
+Every ``touch.refit_every`` steps the encoder is refitted, from its current
 weights, on all labelled frames so far, and the cache is recomputed:
 perception keeps improving with the run's own data. No data is added: the
 labelled taps are the run's own steps, counted in its epochs.

@@ -8,8 +8,9 @@ environments call it before they build anything, and a training config
 so that a bad setting is refused before a run starts. The ``Literal`` types
 here are the value sets; the tuples are the same, for messages and choices.
 
-This module imports only the standard library: the config imports it to
-annotate its fields.
+Importing this module loads only the standard library (the frame-noise check
+reads the rigs' yaw limit when it runs): the config imports it to annotate its
+fields.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ lives here; the reinforcement-learning side lives in
 :mod:`~tactile_braille.agents.touch` (``TouchAgent``: an agent acting on the
 frozen encoder's features) and :mod:`~tactile_braille.agents.training` (the taps
 are the run's own steps, labelled in its replay, and the encoder is refitted
-on them every ``touch_refit_every`` steps). Nothing about the goal or the
+on them every ``touch.refit_every`` steps). Nothing about the goal or the
 reward is used.
 
 The ``tactile`` track has no such labels: :func:`fit_touch_odometry` fits the
