@@ -72,7 +72,9 @@ class PooledQAgent(Agent):
         self.config = config or PooledQConfig()
         self.actions = int(action_space.n)
         cells = (100 // self.config.pool) ** 2
-        inputs = cells + observation_space["desired_goal"].shape[0] + observation_space["previous_action"].shape[0]
+        inputs = (
+            cells + observation_space["desired_goal"].shape[0] + observation_space["previous_action"].shape[0]
+        )
         layers, size = [], inputs
         for units in self.config.hidden:
             layers += [nn.Linear(size, units), nn.ReLU()]
@@ -96,7 +98,9 @@ class PooledQAgent(Agent):
         epsilon = config.epsilon_start + fraction * (config.epsilon_end - config.epsilon_start)
         if explore and not deterministic and rng.random() < epsilon:
             return int(rng.integers(self.actions))
-        inputs = self._inputs(observation["observation"], observation["desired_goal"], observation["previous_action"])
+        inputs = self._inputs(
+            observation["observation"], observation["desired_goal"], observation["previous_action"]
+        )
         return int(self.q(inputs).argmax(dim=1).item())
 
     def update(self, batch) -> dict[str, float]:
@@ -119,13 +123,17 @@ class PooledQAgent(Agent):
 
 
 POOLED_Q = register_agent(
-    AgentSpec(name="pooled_q", config=PooledQConfig, agent=PooledQAgent, actions={"discrete"}, label="Pooled Q"),
+    AgentSpec(
+        name="pooled_q", config=PooledQConfig, agent=PooledQAgent, actions={"discrete"}, label="Pooled Q"
+    ),
     replace=True,  # this file may be run or imported more than once in one process
 )
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--epochs", type=int, default=1)
     parser.add_argument("--steps-per-epoch", type=int, default=250)
     parser.add_argument("--seed", type=int, default=0)
@@ -140,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = train(config, run_dir=args.run_dir, resume=False, progress=False)
     _, env, agent = load_run(run_dir)
     report = evaluate_policy(agent, "DiscreteArrows-v0", env=env, seed=args.seed)
-    print(f"{run_dir}: typing accuracy {report.accuracy:.3f} over {report.keys_asked} keys in {report.total_steps} steps")
+    keys, steps = report.keys_asked, report.total_steps
+    print(f"{run_dir}: typing accuracy {report.accuracy:.3f} over {keys} keys in {steps} steps")
     return 0
 
 

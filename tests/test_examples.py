@@ -112,7 +112,16 @@ def test_a_custom_agent_is_one_file_registered_trained_by_the_loop_and_scored(
 
     module = _load("custom_agent")
     run = tmp_path / "pooled_q"
-    argv = ["--epochs", "1", "--steps-per-epoch", "60", "--run-dir", str(run), "--dataset", str(env_datasets[ARROWS])]
+    argv = [
+        "--epochs",
+        "1",
+        "--steps-per-epoch",
+        "60",
+        "--run-dir",
+        str(run),
+        "--dataset",
+        str(env_datasets[ARROWS]),
+    ]
     assert module.main(argv) == 0
     (row,) = read_progress(run)
     assert row["env_steps"] == 60 and row["updates"] > 0 and np.isfinite(row["losses/q_loss"])

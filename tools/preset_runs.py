@@ -18,8 +18,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tactile_braille.agents.presets import PRESETS, preset_config
 from tactile_braille._registration import ENV_IDS as TASKS
+from tactile_braille.agents.presets import PRESETS, preset_config
+from tactile_braille.agents.registry import agent_names
 
 SHORT = ["--epochs", "2", "--steps-per-epoch", "150", "--test-episodes", "3",
          "--threads", "1", "--precision", "fp32", "--quiet"]  # fmt: skip
@@ -31,7 +32,7 @@ def combinations() -> list[tuple[str, str, str]]:
     found = []
     for preset in PRESETS:
         for task in TASKS:
-            for algo in ("dqn", "sac_discrete", "sac", "td3", "planner"):
+            for algo in agent_names():
                 try:
                     preset_config(preset, task, algo)
                 except ValueError:
@@ -41,7 +42,9 @@ def combinations() -> list[tuple[str, str, str]]:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("root", type=Path, help="folder of the runs")
     parser.add_argument("--compare", type=Path, help="a second root: compare its runs with ROOT's")
     parser.add_argument("--only", help="run only the combinations whose folder name contains this")
@@ -63,7 +66,9 @@ def main() -> int:
     if args.compare is None:
         return 0
     pairs = [str(root / name) for name in names for root in (args.root, args.compare)]
-    return subprocess.run([sys.executable, str(Path(__file__).with_name("compare_progress.py")), *pairs]).returncode
+    return subprocess.run(
+        [sys.executable, str(Path(__file__).with_name("compare_progress.py")), *pairs]
+    ).returncode
 
 
 if __name__ == "__main__":

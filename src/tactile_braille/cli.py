@@ -12,8 +12,8 @@ from pathlib import Path
 from tactile_braille._io import LockedError
 from tactile_braille._tasks import KEY_SETS
 from tactile_braille.agents.config import BACKENDS, PRECISIONS
-from tactile_braille.agents.registry import agent_names
 from tactile_braille.agents.presets import PRESETS as TRAINING_PRESETS
+from tactile_braille.agents.registry import agent_names
 from tactile_braille.gallery import GALLERY_DEPTH_MM
 from tactile_braille.rigs.base import RigError
 from tactile_braille.sensor.config import PRESETS as SENSORS

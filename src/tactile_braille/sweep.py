@@ -41,8 +41,8 @@ from typing import Any
 
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.config import differences
-from tactile_braille.agents.registry import agent_spec
 from tactile_braille.agents.presets import preset_config
+from tactile_braille.agents.registry import agent_spec
 from tactile_braille.agents.run import MACHINE_SETTINGS, read_config, read_progress, setting_differences
 from tactile_braille.agents.training import train
 from tactile_braille.envs.registry import task_of

@@ -24,8 +24,8 @@ from torch.nn import functional as F
 from agents_helpers import ALGOS, CONTINUOUS_TASK, DISCRETE_TASK, HIDDEN, same_weights, through_file
 from feature_agents import ACTIONS, FEATURES, GOALS, PREVIOUS, batch, make
 from tactile_braille.agents import common
-from tactile_braille.agents.registry import agent_spec
 from tactile_braille.agents.common import POSE_SIZE
+from tactile_braille.agents.registry import agent_spec
 
 ACTOR_CRITICS = ("sac_discrete", "sac", "td3")
 
@@ -328,7 +328,9 @@ def test_initial_temperature_is_a_hyperparameter(algo, env_datasets):
     task = "tactile_braille/ContinuousArrows-v0" if algo == "sac" else "tactile_braille/DiscreteArrows-v0"
     env = gym.make(task, dataset=env_datasets[task])
     algorithm = agent_spec(algo)
-    agent = algorithm.agent_class(env.observation_space, env.action_space, algorithm.config(initial_alpha=0.05))
+    agent = algorithm.agent_class(
+        env.observation_space, env.action_space, algorithm.config(initial_alpha=0.05)
+    )
     assert float(agent.log_alpha.detach().exp()) == pytest.approx(0.05)
     assert (
         float(algorithm.agent_class(env.observation_space, env.action_space).log_alpha.detach().exp()) == 1.0

@@ -1,4 +1,4 @@
-"""The agent registry: one entry per agent, from which settings, the command line, presets and reports read."""
+"""The agent registry: one entry per agent, which settings, the command line, presets and reports read."""
 
 from __future__ import annotations
 
@@ -92,7 +92,7 @@ def test_a_registered_agent_is_a_run_setting_a_cli_choice_and_an_option_source(s
         TinyConfig(gamma=2.0)  # the usual ranges, from the base class
     args = build_parser().parse_args(["train", "DiscreteArrows-v0", "tiny", "--agent.spread", "3"])
     assert args.algo == "tiny"
-    with pytest.raises(ImportError, match="cannot import 'mypackage.agents:TinyAgent'"):
+    with pytest.raises(ImportError, match=r"cannot import 'mypackage\.agents:TinyAgent'"):
         agent_spec("tiny").agent_class  # noqa: B018 - imported on first use, and named when it fails
 
 
@@ -117,7 +117,9 @@ def test_an_agent_without_policy_action_or_update_cannot_be_made():
         Incomplete("cpu", "fp32")
 
 
-def test_an_installed_package_brings_its_agents_through_an_entry_point(scratch_registry, tmp_path, monkeypatch):
+def test_an_installed_package_brings_its_agents_through_an_entry_point(
+    scratch_registry, tmp_path, monkeypatch
+):
     """A distribution on the path whose ``tactile_braille.agents`` entry point names a module that registers
     an agent: the command line and the settings know the agent without anyone importing it."""
     info = tmp_path / "tiny_plugin-1.0.dist-info"
@@ -127,7 +129,8 @@ def test_an_installed_package_brings_its_agents_through_an_entry_point(scratch_r
     (tmp_path / "tiny_plugin_agent.py").write_text(
         "from tactile_braille.agents.registry import AgentSpec, register_agent\n"
         "from tactile_braille.agents.config import PlannerConfig\n"
-        "register_agent(AgentSpec('tiny_plugin', PlannerConfig, 'tiny_plugin_agent:Agent', {'discrete'}, 'Tiny'))\n"
+        "register_agent(AgentSpec('tiny_plugin', PlannerConfig, 'tiny_plugin_agent:Agent', {'discrete'},\n"
+        "                         'Tiny'))\n"
     )
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(registry, "_entry_points_loaded", False)
@@ -136,5 +139,7 @@ def test_an_installed_package_brings_its_agents_through_an_entry_point(scratch_r
     (tmp_path / "tiny_plugin_agent.py").write_text("raise RuntimeError('broken plugin')\n")
     monkeypatch.delitem(__import__("sys").modules, "tiny_plugin_agent")
     monkeypatch.setattr(registry, "_entry_points_loaded", False)
-    with pytest.raises(ImportError, match=r"agent entry point 'tiny' \(tiny_plugin_agent\) failed: broken plugin"):
+    with pytest.raises(
+        ImportError, match=r"agent entry point 'tiny' \(tiny_plugin_agent\) failed: broken plugin"
+    ):
         agent_names()

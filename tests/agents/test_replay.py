@@ -27,19 +27,19 @@ import replay_helpers
 from replay_helpers import FEATURES, GOALS, Frames, as_images, replay_observation
 from tactile_braille.agents import replay as after
 from tactile_braille.agents.replay import (
-    GoalOutcomes,
-    PressFrames,
-    ReturnBounds,
-    SensorPoses,
     FRAME_LABELS,
     PACKED_BYTES,
     RELABELLING,
     EpisodeReplayBuffer,
     FeatureCache,
     FrameStore,
+    GoalOutcomes,
     PaperRelabelling,
+    PressFrames,
     Relabelling,
+    ReturnBounds,
     SampledRelabelling,
+    SensorPoses,
     make_relabelling,
     random_shift,
 )
@@ -158,9 +158,7 @@ def test_return_bounds_are_the_discounted_return_of_the_transitions_own_episode(
     np.testing.assert_array_equal(
         again.sample(300, np.random.default_rng(0))["return_bounds"], batch["return_bounds"]
     )
-    late = EpisodeReplayBuffer(
-        100, GOALS, (), 5, her=False, extras=(ReturnBounds(0.5, after=6),)
-    )
+    late = EpisodeReplayBuffer(100, GOALS, (), 5, her=False, extras=(ReturnBounds(0.5, after=6),))
     run_episode(late, goal=2, pressed=2, steps=3)
     assert not late.sample(50, np.random.default_rng(0))["return_bounds"].any()  # 3 transitions of 6
     run_episode(late, goal=2, pressed=2, steps=3)
@@ -402,7 +400,13 @@ def test_goal_weights_are_how_often_the_relabelling_samples_each_goal():
             counts = np.bincount(goals[rows], minlength=GOALS) / rows.sum()
             np.testing.assert_allclose(counts, weights[rows][0], atol=0.06)
     paper = EpisodeReplayBuffer(
-        100, GOALS, (), replay_helpers.PREVIOUS, max_episode_steps=10, relabel="paper", extras=(GoalOutcomes(),)
+        100,
+        GOALS,
+        (),
+        replay_helpers.PREVIOUS,
+        max_episode_steps=10,
+        relabel="paper",
+        extras=(GoalOutcomes(),),
     )
     fill(paper, Frames())
     batch = paper.sample(50, np.random.default_rng(8))

@@ -159,7 +159,12 @@ class Agent(abc.ABC):
 
     @abc.abstractmethod
     def policy_action(
-        self, observation: dict, step: int, explore: bool, rng: np.random.Generator, deterministic: bool = False
+        self,
+        observation: dict,
+        step: int,
+        explore: bool,
+        rng: np.random.Generator,
+        deterministic: bool = False,
     ):
         """The action for one observation dict: an ``int`` for a ``Discrete`` space, a float32 array in
         [-1, 1] for a ``Box``. ``step`` counts the run's environment steps (for exploration schedules);
@@ -214,7 +219,7 @@ class Agent(abc.ABC):
         planner, reads its own from the replay)."""
         return buffer.sample(batch_size, rng)
 
-    def end_epoch(self) -> None:
+    def end_epoch(self) -> None:  # noqa: B027 - an optional hook: most agents do nothing here
         """Called by the training loop after each epoch's steps and updates, before its test."""
 
     def state_dict(self) -> dict:

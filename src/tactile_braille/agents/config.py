@@ -235,7 +235,9 @@ class DQNConfig(AgentConfig):
         if self.return_bound and self.all_goals:
             raise ValueError("return_bound bounds the sampled goal's target; all_goals computes every goal's")
         if self.all_goals_weights != "uniform" and not self.all_goals:
-            raise ValueError("agent.all_goals_weights weighs the goals of an all-goals update: set agent.all_goals")
+            raise ValueError(
+                "agent.all_goals_weights weighs the goals of an all-goals update: set agent.all_goals"
+            )
 
     def check_run(self, run: TrainConfig) -> None:
         check_goal_inputs(run, self.all_goals, self.goal_heads)

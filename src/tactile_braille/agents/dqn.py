@@ -18,13 +18,13 @@ from torch import nn
 from torch.nn import functional as F
 
 from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
-from tactile_braille.agents.replay import GoalOutcomes, PressFrames, ReturnBounds
 from tactile_braille.agents.config import DQNConfig
 from tactile_braille.agents.networks import (
     DuelingQNetwork,
     observation_tensors,
     soft_update,
 )
+from tactile_braille.agents.replay import GoalOutcomes, PressFrames, ReturnBounds
 from tactile_braille.supervised.fit import adam
 
 
@@ -160,7 +160,9 @@ class DQNAgent(Agent):
             target = t["rewards"] + self.discount(t) * (1.0 - t["dones"]) * next_value
             if self.config.return_bound:
                 if "return_bounds" not in t:
-                    raise ValueError("return_bound needs batches with 'return_bounds' (the ReturnBounds extra)")
+                    raise ValueError(
+                        "return_bound needs batches with 'return_bounds' (the ReturnBounds extra)"
+                    )
                 target = torch.maximum(target, t["return_bounds"])
         q_all = self.q(t["images"], t["goals"], t["previous_actions"])
         return chosen(q_all, t["actions"]).float(), target

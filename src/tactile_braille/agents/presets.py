@@ -57,7 +57,6 @@ PRESET_TRACKS = {"paper": "tactile", "released": "tactile", "fast": "proprio", "
 from touch alone; ``fast`` also from the arm's pose and the calibrated key layout."""
 
 
-
 @dataclass(frozen=True)
 class TaskPresets:
     """What the presets set on one registered braille task: a row of :data:`TASK_PRESETS`.

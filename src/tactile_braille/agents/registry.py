@@ -89,7 +89,9 @@ class AgentSpec:
         if not isinstance(self.agent, type | str) or (isinstance(self.agent, str) and ":" not in self.agent):
             problems.append(f"agent must be a class or 'module:Class', got {self.agent!r}")
         if not self.actions or not self.actions <= set(ACTION_KINDS):
-            problems.append(f"actions must be a non-empty subset of {ACTION_KINDS}, got {sorted(self.actions)}")
+            problems.append(
+                f"actions must be a non-empty subset of {ACTION_KINDS}, got {sorted(self.actions)}"
+            )
         if not isinstance(self.label, str) or not self.label:
             problems.append(f"label must be a non-empty string, got {self.label!r}")
         if not isinstance(self.updates_per_step, int) or self.updates_per_step < 0:
@@ -126,7 +128,9 @@ def register_agent(spec: AgentSpec, replace: bool = False) -> AgentSpec:
     if not isinstance(spec, AgentSpec):
         raise TypeError(f"register_agent takes an AgentSpec, got {type(spec).__name__}")
     if spec.name in _REGISTRY and not replace and _REGISTRY[spec.name] != spec:
-        raise ValueError(f"an agent named {spec.name!r} is registered already; pass replace=True to replace it")
+        raise ValueError(
+            f"an agent named {spec.name!r} is registered already; pass replace=True to replace it"
+        )
     _REGISTRY[spec.name] = spec
     return spec
 
@@ -170,7 +174,9 @@ def load_entry_points() -> None:
         try:
             entry.load()
         except Exception as error:
-            raise ImportError(f"the agent entry point {entry.name!r} ({entry.value}) failed: {error}") from error
+            raise ImportError(
+                f"the agent entry point {entry.name!r} ({entry.value}) failed: {error}"
+            ) from error
 
 
 def agent_label(name: str) -> str:

@@ -406,7 +406,11 @@ def append_progress(path: Path, row: dict) -> None:
             rows = [r for r in csv.DictReader(handle) if int(r["epoch"]) < row["epoch"]]
     rows.append(row)
     logged = dict.fromkeys(name for logged_row in rows for name in logged_row)
-    fields = [*PROGRESS_FIELDS, *(n for n in logged if n not in (*PROGRESS_FIELDS, *TIMING_FIELDS)), *TIMING_FIELDS]
+    fields = [
+        *PROGRESS_FIELDS,
+        *(n for n in logged if n not in (*PROGRESS_FIELDS, *TIMING_FIELDS)),
+        *TIMING_FIELDS,
+    ]
     with atomic_path(path) as temporary, open(temporary, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=fields, restval="")
         writer.writeheader()

@@ -29,13 +29,13 @@ from tactile_braille.agents.common import (
     spaces_sizes,
 )
 from tactile_braille.agents.config import SACConfig
-from tactile_braille.agents.replay import GoalOutcomes, SensorPoses
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     GaussianPolicy,
     observation_tensors,
     soft_update,
 )
+from tactile_braille.agents.replay import GoalOutcomes, SensorPoses
 from tactile_braille.supervised.fit import adam
 
 
@@ -58,7 +58,10 @@ class SACAgent(Agent):
     @classmethod
     def replay_extras(cls, config: SACConfig) -> tuple:
         """Every goal's outcome (``all_goals``) and the sensor poses its critics see (``critic_pose``)."""
-        return (*([GoalOutcomes()] if config.all_goals else []), *([SensorPoses()] if config.critic_pose else []))
+        return (
+            *([GoalOutcomes()] if config.all_goals else []),
+            *([SensorPoses()] if config.critic_pose else []),
+        )
 
     def __init__(
         self,

@@ -21,9 +21,9 @@ from torch import nn
 from torch.nn import functional as F
 
 from tactile_braille.agents.common import Agent, chosen, every_goal_rewards, network_options, spaces_sizes
-from tactile_braille.agents.replay import GoalOutcomes
 from tactile_braille.agents.config import DiscreteSACConfig
 from tactile_braille.agents.networks import DuelingQNetwork, PolicyNetwork, observation_tensors, soft_update
+from tactile_braille.agents.replay import GoalOutcomes
 from tactile_braille.supervised.fit import adam
 
 

@@ -25,13 +25,13 @@ from tactile_braille.agents.common import (
     spaces_sizes,
 )
 from tactile_braille.agents.config import TD3Config
-from tactile_braille.agents.replay import SensorPoses
 from tactile_braille.agents.networks import (
     ContinuousQNetwork,
     DeterministicPolicy,
     observation_tensors,
     soft_update,
 )
+from tactile_braille.agents.replay import SensorPoses
 from tactile_braille.agents.sac import _unit_box_size
 from tactile_braille.supervised.fit import adam
 

@@ -274,7 +274,9 @@ def make_agent(config: TrainConfig, env: gym.Env):
         raise ValueError(f"{config.algo} cannot act in {config.task}'s action space {env.action_space}")
     agent_class = spec.agent_class
     if not config.touch.enabled:
-        return agent_class(env.observation_space, env.action_space, config.agent, config.device, config.precision)
+        return agent_class(
+            env.observation_space, env.action_space, config.agent, config.device, config.precision
+        )
     keys = env.observation_space["desired_goal"].shape[0]
     touch = config.touch
     encoder = TouchEncoder(keys, TouchEncoderConfig().features, TouchEncoderConfig().hidden, touch.labels)

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_braille.agents.registry import agent_label
 from tactile_braille.agents.run import json_differences
 from tactile_braille.envs.core import WORLD_RULES
-from tactile_braille.agents.registry import agent_label
 from tactile_braille.evaluation.report import PAPER_TABLE, TASK_NAMES, TRACK_TITLES
 from tactile_braille.evaluation.results import read_result
 

@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from tactile_braille._io import atomic_path
+from tactile_braille.agents.registry import agent_label, agent_spec
 from tactile_braille.agents.run import read_config, read_progress, run_world
 from tactile_braille.envs.memory import TapMemory
 from tactile_braille.envs.registry import task_name, task_of
 from tactile_braille.evaluation.protocol import paper_sequences
-from tactile_braille.agents.registry import agent_label, agent_spec
 from tactile_braille.evaluation.report import departures
 from tactile_braille.evaluation.results import make_result, read_result, write_result
 from tactile_braille.evaluation.scoring import (
