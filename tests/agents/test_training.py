@@ -208,7 +208,7 @@ def test_sac_bf16_training_logs_finite_losses(env_datasets, tmp_path, recording)
     assert row["updates"] > 0 and row["updates"] % 2 == 0  # bursts of updates_per_step = 2
     for name in ("losses/qf_loss", "losses/actor_loss", "losses/alpha", "losses/entropy"):
         assert math.isfinite(row[name]), name
-    assert math.isnan(row["losses/q_loss"])  # DQN's loss is blank for SAC
+    assert "losses/q_loss" not in row  # the log names the losses its agent returns: not DQN's
     assert 0.0 <= row["test/success_rate"] <= 1.0
     files = run_files(run)
     assert files["replay"] == ["replay.0.npz"] and len(files["events"]) >= 1
