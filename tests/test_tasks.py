@@ -3,6 +3,8 @@ reads the key sets' rows rather than asking which key set a task types."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -92,3 +94,45 @@ def test_each_grid_cell_of_a_key_lies_on_that_key(keys):
             assert x == key.centre_x_mm and abs(y - key.centre_y_mm) < half_width_mm, (grid_name, name)
             if key.width_u == 1:
                 assert y == key.centre_y_mm, (grid_name, name)  # a key of one cell: its very centre
+
+
+def test_a_task_of_your_own_is_registered_from_rows_and_plays():
+    """register_task: a new key set's id made with Gymnasium on the live renderer, a press of its goal
+    rewarded; the settings know it; a clash is refused before anything is registered."""
+    import tactile_braille
+    from tactile_braille.agents.config import TrainConfig
+
+    qwe = tactile_braille.KeySet(
+        name="qwe_own", keys=("Q", "W", "E"), key_grids={"rig": (tuple("QWE"),), "released": (tuple("QWE"),)},
+        max_move_mm=10.0, workspace_mm=((-10.0, 10.0), (-25.0, 25.0)), work_frame="alphabet",
+        grid_spacing_mm=1.0, grid_depth_step_mm=1.0, typing_sequences=None, types_sentences=False,
+    )  # fmt: skip
+    task = tactile_braille.RegisteredTask("mylab/DiscreteQWE-v0", "qwe_own", continuous=False, label="qwe")
+    try:
+        tactile_braille.register_task(task, qwe)
+        env = gym.make(task.env_id, backend="render")
+        observation, info = env.reset(seed=0)
+        assert observation["desired_goal"].shape == (3,) and info["goal_key"] in "QWE"
+        column = "QWE".index(info["goal_key"])
+        start = "QWE".index(
+            min("QWE", key=lambda k: abs(info["sensor_pose_mm"][1] - env.unwrapped.layout.centre_mm(k)[1]))
+        )
+        moves = [3 if column > start else 2] * abs(column - start)  # RIGHT or LEFT along the row
+        for action in [*moves, 4]:
+            observation, reward, terminated, _, info = env.step(action)
+        assert terminated and reward == 1.0 and info["pressed_key"] == info["goal_key"]
+        assert TrainConfig(task=task.env_id, backend="render").braille_task.keys == "qwe_own"
+        with pytest.raises(ValueError, match="registered already"):
+            tactile_braille.register_task(task, qwe)
+        other = tactile_braille.RegisteredTask(
+            "mylab/ContinuousQWE-v0", "qwe_own", continuous=True, label="q"
+        )
+        with pytest.raises(ValueError, match="exists with other contents"):
+            tactile_braille.register_task(other, dataclasses.replace(qwe, max_move_mm=5.0))
+        assert "mylab/ContinuousQWE-v0" not in gym.registry
+        with pytest.raises(ValueError, match="unknown key set 'zxc'"):
+            tactile_braille.register_task(tactile_braille.RegisteredTask("mylab/Z-v0", "zxc", False, "z"))
+    finally:
+        KEY_SETS.pop("qwe_own", None)
+        for env_id in ("mylab/DiscreteQWE-v0", "mylab/ContinuousQWE-v0"):
+            gym.registry.pop(env_id, None)

@@ -9,8 +9,10 @@ registers the environments with Gymnasium (by name; nothing else is loaded).
 """
 
 from tactile_braille._registration import register_envs as _register_envs
+from tactile_braille._registration import register_task
+from tactile_braille._tasks import KeySet, RegisteredTask
 from tactile_braille._version import __version__
 
 _register_envs()
 
-__all__ = ["__version__"]
+__all__ = ["KeySet", "RegisteredTask", "__version__", "register_task"]
