@@ -8,7 +8,8 @@ a change into two roots, then compare the logs:
     python tools/preset_runs.py runs/after
     python tools/compare_progress.py runs/before/X runs/after/X ...   (or --compare ROOT_A ROOT_B)
 
-Runs already finished in ROOT are kept (a killed sweep continues where it stopped).
+Runs whose folder exists in ROOT are left to whoever made them, so that two sweeps
+(``--only``) can share a root; delete the folder of a run that was killed.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ def main() -> int:
             continue
         names.append(name)
         run = args.root / name
-        if args.compare is None and not (run / "progress.csv").exists():
+        if args.compare is None and not run.exists():  # another sweep on ROOT may be running it
             # Touch encoders and the replay fill from the random start steps: keep them short but present.
             start = [] if algo == "planner" else ["--start-steps", "100"]
             command = [sys.executable, "-m", "tactile_braille.cli", "train", task, algo, "--preset", preset,
