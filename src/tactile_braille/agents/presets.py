@@ -36,8 +36,8 @@ encoder learns from the arm's pose and the key layout) is ``proprio``.
 (25, 2, 0.95)
 >>> preset_config("fast", "tactile_braille/DiscreteArrows-v0", "dqn").track
 'proprio'
->>> preset_differences("released", "tactile_braille/ContinuousArrows-v0", "sac")
-['agent.hidden: [512] -> [1024, 512]', 'max_episode_steps: 25 -> 35']
+>>> preset_differences("released", "tactile_braille/DiscreteArrows-v0", "sac_discrete")[:2]
+['agent.dueling: True -> False', 'agent.initial_alpha: 1.0 -> 1.174618943088019']
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class TaskPresets:
         fast_epochs: the ``fast`` preset's: a third of the paper's convergence epochs or less, and the
             90-epoch budget for the continuous alphabet.
         fast_tactile_epochs: the ``fast-tactile`` preset's: ``fast``'s, and on the continuous alphabet a
-            third of the paper's 872 convergence epochs (issue 21's target).
+            third of the paper's 872 convergence epochs.
         fast: what ``fast`` sets on this task beyond what it sets on every task (:func:`fast_changes`;
             a group as a dict of its settings).
         planner_epochs: the planner's epochs (``fast-tactile``) where they are not
@@ -117,7 +117,7 @@ RELEASED_CHANGES: dict[str, dict[str, Any]] = {
     # The target moves 99.5 % of the way to the online network once per epoch (its `polyak: 0.005` is
     # the share the target keeps); epsilon steps down once per epoch; tests explore with 0.05. Its
     # dueling heads each read half of the dense units, and every layer starts from TensorFlow's
-    # variance scaling (since session 15; the rows run before it depart from it, and say so).
+    # variance scaling (records run before the project took it depart from it, and say so).
     "dqn": {
         "agent": {
             "test_epsilon": 0.05,
@@ -130,12 +130,12 @@ RELEASED_CHANGES: dict[str, dict[str, Any]] = {
         "update_after": 1,
     },
     # log alpha starts at the target entropy, 0.1 ln 5: alpha = 5 ** 0.1. Its critics have one head of
-    # Q-values (no dueling), and every layer starts from TensorFlow's variance scaling (since session 17).
+    # Q-values (no dueling), and every layer starts from TensorFlow's variance scaling.
     "sac_discrete": {
         "agent": {"initial_alpha": 5**0.1, "dueling": False, "weights_init": "released"},
         "update_after": 1,
     },
-    # Since session 19 both continuous agents also start from the release's initial weights (Glorot
+    # Both continuous agents also start from the release's initial weights (Glorot
     # heads), and SAC's log deviation runs through a tanh onto [-20, 2]; their networks read actions in
     # mm (:func:`released_changes` sets the scale, the task's largest move).
     "sac": {
@@ -159,7 +159,7 @@ in [-1, 1] units of the task's largest move, so :func:`paper_changes` divides by
 def paper_changes(task: str, algo: str) -> dict[str, Any]:
     """What the paper's presets set beyond the defaults, for a task and an algorithm: its epochs and
     25-step episodes, on the continuous tasks the released simulator's workspace edge and depth lookup
-    (``edges="overrun"``, ``tap_depth="released"``, since session 22), and TD3's noise in the units of
+    (``edges="overrun"``, ``tap_depth="released"``), and TD3's noise in the units of
     the released code (mm)."""
     spec, presets = task_presets(task)
     changes: dict[str, Any] = {"epochs": presets.paper_epochs, "max_episode_steps": 25}
@@ -220,7 +220,7 @@ def fast_changes(task: str, algo: str) -> dict[str, Any]:
         "replay": {"relabel": "all"},
         # The agent acts on what the encoder reads (pose, key probabilities), the arm's pose and the
         # goal key's place on the calibrated layout, all in the encoder's pose coordinates: "where to go"
-        # is then one function for every key, and the pose the arm reports makes it exact (issue 20).
+        # is then one function for every key, and the pose the arm reports makes it exact.
         "touch": {"enabled": True, "inputs": "readout", "goal_positions": True, "pose_inputs": True},
         "agent": {"hidden": (256, 256), "batch_size": 128, "learning_rate": 1e-3, "adam_eps": 1e-8},
     }
@@ -256,36 +256,19 @@ def planner_changes(task: str) -> dict[str, Any]:
     tasks a press on the last step a training episode's time limit allows (every training episode then
     labels its frames).
 
-    On the continuous tasks (tuned on seeds 100-102 of the arrows, session 33) its moves tap at a
-    commanded 4 mm, the depth of an episode's first tap (every frame it reads is then alike); its random
-    actions press 8 times in 10, over 2,000 steps of decaying epsilon (each press names the key under the
-    sensor, and there the start is anywhere: the labels must cover every part of each key); and its
-    states are each key as reached by each move (``entry_memory``: a move of 10 or 20 mm may leave the
-    sensor on the key it was on, and how it came onto a key says which part it is on). No final press:
-    there a press with the move asked would be none of its five actions. On the continuous arrows, in
-    test episodes and typing, it presses only where the frame itself reads the goal at 0.8 or more
-    (``press_reading``; tuned on seeds 100-102, sessions 37 and 38): the filter, carried by the graph,
-    believed a move from DOWN had reached UP where the frame still showed DOWN, and a move up from
-    RIGHT's corner onto the key beside UP read UP at 0.76. Nor does it press on an episode's first
-    frame (``first_press`` False, session 38): read alone at an unknown place, a corner of a key beside
-    UP reads as UP, surely; after a move the graph weighs in. Not on the alphabet,
-    where the same checkpoints of seeds 15-19 typed in more steps with it (a reader blind to a key,
-    W or U, refuses the presses the graph would make there). On the continuous alphabet its
-    moves are 18 mm (``move`` 0.9; tuned on its seed 100, session 34), shorter than nearly every key
-    along a row (18-21 mm, a 19 mm pitch): a move of 20 mm from a key's far edge skips the key beside
-    it, and the planner then circles between the keys on either side, or presses the one it skipped
-    to.
-
-    On the discrete tasks (tuned on seeds 100 and 101 of the alphabet and 100 of the arrows, session 35)
-    its backtracking reads each frame's class with how often each state is occupied (``backtrack_prior``:
-    the many rarely occupied states off the keys outvoted the keys beside them, labelling frames of P,
-    X or SPACE *nothing*), and its value iteration gives a move into the generic *nothing* none of that
-    state's value (``lost_value`` 0): the generic nothing stands for every cell off the keys at once,
-    and its pooled moves promised a key beside the cells off the keys at each step, so that plans went
-    through it and timed out there. On the continuous alphabet too (``lost_value`` 0 on nothing's five
-    entry states; tuned on its seed 100, session 35), where a key that is not the task's reads as
-    nothing too: there the plans went the same way. Not on the continuous arrows,
-    where the plans seldom leave the keys (its tuning seed types as well, in 4 % more steps)."""
+    On the continuous tasks its moves tap at a commanded 4 mm (``sense_depth``, the depth of an
+    episode's first tap, so that every frame it reads is alike); its random actions press 8 times in 10
+    (``explore_press``: each press names the key under the sensor, and the labels must cover every part
+    of each key) over 2,000 steps of decaying epsilon; its states are each key as reached by each move
+    (``entry_memory``: a move may leave the sensor on the key it was on); and no final press (a press
+    with the move asked is none of its five actions). On the continuous arrows, in test episodes and
+    typing, it presses only where the frame itself reads the goal at 0.8 or more (``press_reading``),
+    and never on an episode's first frame (``first_press`` False). On the continuous alphabet its moves
+    are 18 mm (``move`` 0.9), shorter than nearly every key along a row. On the discrete tasks its
+    backtracking weighs each state by how often it is occupied (``backtrack_prior``); on the discrete
+    tasks and the continuous alphabet a move into the generic *nothing* is worth none of that state's
+    value (``lost_value`` 0). Each was tuned on seeds 100-102; docs/agents.md ("The key-graph
+    planner") has the measurements behind each."""
     spec, presets = task_presets(task)
     epochs = presets.fast_tactile_epochs if presets.planner_epochs is None else presets.planner_epochs
     changes: dict[str, Any] = {

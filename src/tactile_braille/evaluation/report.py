@@ -321,7 +321,7 @@ def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
 
 
 TABLE3_SEEDS = 5
-"""Seeds per row of Table III and preset, as the paper ran them (issue 17)."""
+"""Seeds per row of Table III and preset, as the paper ran them."""
 TABLE3_SHORT_ROWS = {"ContinuousAlphabet-v0": (3, 100)}
 """Rows too long for a CPU (2,000 epochs), asked as far as compute allows: (seeds, epochs) at least."""
 TABLE3_PRESETS = ("paper", "released")
