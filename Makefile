@@ -55,7 +55,8 @@ bench: $(STAMP)
 # progress and typing of each run; no checkpoints: `tactile-braille benchmark ... --archive results/...`
 # and `tactile-braille archive` write them). Runs on any machine, no training needed.
 # docs/leaderboard.md ranks those records and the results files of other libraries' agents
-# (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md).
+# (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md), and puts its
+# headline table (per task: the paper, our best per track, the best other method) into README.md.
 # results/tuning/ holds the runs settings were chosen on (their seeds are not reported), and
 # results/diagnostics/ runs that test a cause (some stopped early): both left out here.
 # results/transfer/ holds runs typed in other worlds (evaluate --world): their own section.
@@ -71,7 +72,7 @@ results: $(STAMP)
 	$(TB) report $(RECORDS) --output docs/results.md $(if $(TRANSFER),--transfer $(TRANSFER)) \
 		$(if $(WARM),--warm-start $(WARM)) \
 		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
-	$(TB) leaderboard $(RANKED) $(RESULT_FILES) --output docs/leaderboard.md \
+	$(TB) leaderboard $(RANKED) $(RESULT_FILES) --output docs/leaderboard.md --headline README.md \
 		--title "Leaderboard: typing on the braille keyboard"
 
 clean:

@@ -39,7 +39,7 @@ VARIANTS = {
     "paper-relabel": ("fast", {"replay": {"relabel": "paper"}}),
     "paper+all": ("paper", {"replay": {"relabel": "all"}}),
     # The continuous alphabet's additions, taken away one after another: the readout, the placed
-    # goals, the asymmetric critics (what is left is the fast preset of session 3).
+    # goals, the asymmetric critics (what is left is the first fast preset, of 2026-11-22).
     "latent": ("fast", {"touch": {"inputs": "features"}}),
     "latent-no-goal-positions": ("fast", {"touch": {"inputs": "features", "goal_positions": False}}),
     "session-3-fast": (
@@ -60,10 +60,9 @@ VARIANTS = {
     # its optimism for moves the graph has not seen, its repeat penalty; on the discrete tasks the
     # memory of the key a cell off the keys was left from and the final press of a training episode;
     # on the continuous ones the entry states and the exploration that presses 8 times in 10; on the
-    # discrete ones (session 35) the occupancy its backtracking reads with and the worthless generic
-    # nothing of its value iteration; on the continuous ones (session 37) the test press that waits for
-    # a frame showing the goal (at 0.8 since session 38, 0.5 before), and (session 38) the first
-    # frame's press.
+    # discrete ones the occupancy its backtracking reads with and the worthless generic nothing of
+    # its value iteration; on the continuous ones the test press that waits for a frame showing the
+    # goal (at 0.8 since commit 519e9cf, 0.5 before), and the first frame's press.
     "planner-no-filter": ("fast-tactile", {"agent": {"filter": False}}),
     "planner-no-optimism": ("fast-tactile", {"agent": {"optimism": False}}),
     "planner-no-repeat-penalty": ("fast-tactile", {"agent": {"repeat_penalty": 0.0}}),

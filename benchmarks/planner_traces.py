@@ -99,8 +99,8 @@ def traces(
         with np.load(Path(run_dir) / state["replay"]) as replay:
             if "remaining" not in replay.files:
                 raise SystemExit(
-                    f"{run_dir}'s replay has no episode boundaries (written before session 34 checkpointed "
-                    "them): it cannot be refitted as the run would"
+                    f"{run_dir}'s replay has no episode boundaries (written before commit bb59807 "
+                    "checkpointed them): it cannot be refitted as the run would"
                 )
         buffer.load(Path(run_dir) / state["replay"])
         agent.refit(buffer)

@@ -1,7 +1,7 @@
-"""tools/lent_gpu_sweep.sh: bad input refused before it installs or runs anything, and its `run` path.
+"""tools/offline_gpu_sweep.sh: bad input refused before it installs or runs anything, and its `run` path.
 
-`prepare` downloads the wheels a GPU machine lacks (network), and `start`/`collect` span two device
-commands, so those are run by hand (docs/evaluation.md). The `run` path (install the carried wheels,
+`prepare` downloads the wheels an offline GPU node lacks (network), and `start`/`collect` span two
+jobs on the node, so those are run by hand (docs/evaluation.md). The `run` path (install the carried wheels,
 sweep for a budget, archive, pack) runs end to end on the CPU in a slow test, with a placeholder wheel.
 """
 
@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "tools" / "lent_gpu_sweep.sh"
+SCRIPT = Path(__file__).resolve().parents[1] / "tools" / "offline_gpu_sweep.sh"
 
 
-def lent_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
+def offline_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
     environment = {key: value for key, value in os.environ.items() if key != "OUT"} | env
     return subprocess.run(
         ["bash", str(SCRIPT), *args], capture_output=True, text=True, env=environment, timeout=60
@@ -31,8 +31,8 @@ def lent_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(
     ("args", "env", "message"),
     [
-        ((), {}, "tools/lent_gpu_sweep.sh prepare"),  # no verb: the usage
-        (("run", "500"), {}, "tools/lent_gpu_sweep.sh run BUDGET_S"),  # too few arguments: the usage
+        ((), {}, "tools/offline_gpu_sweep.sh prepare"),  # no verb: the usage
+        (("run", "500"), {}, "tools/offline_gpu_sweep.sh run BUDGET_S"),  # too few arguments: the usage
         (
             ("run", "ten", "results/x", "--paper"),
             {"OUT": "/tmp"},
@@ -45,7 +45,7 @@ def lent_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
             "SWEEP_COMMAND must be benchmark or sweep, got 'train'",
         ),
         (("start", "ten", "results/x", "--paper"), {}, "BUDGET_S must be whole seconds, got 'ten'"),
-        (("collect",), {"OUT": "/tmp"}, "tools/lent_gpu_sweep.sh collect WAIT_S"),
+        (("collect",), {"OUT": "/tmp"}, "tools/offline_gpu_sweep.sh collect WAIT_S"),
         (("collect", "soon"), {"OUT": "/tmp"}, "WAIT_S must be whole seconds, got 'soon'"),
         (("collect", "10"), {"STATE": "/nonexistent/state"}, "OUT is not set"),
         (
@@ -55,15 +55,15 @@ def lent_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
         ),
     ],
 )
-def test_lent_gpu_sweep_refuses_bad_input_with_a_clear_message(args, env, message, tmp_path):
+def test_offline_gpu_sweep_refuses_bad_input_with_a_clear_message(args, env, message, tmp_path):
     before = sorted(SCRIPT.parent.parent.glob("results/x"))
-    result = lent_gpu_sweep(*args, **env)
+    result = offline_gpu_sweep(*args, **env)
     assert result.returncode == 2
     assert message in result.stderr
     assert sorted(SCRIPT.parent.parent.glob("results/x")) == before  # nothing was made
 
 
-def test_lent_gpu_sweep_asks_for_the_carried_wheels(tmp_path):
+def test_offline_gpu_sweep_asks_for_the_carried_wheels(tmp_path):
     copy = tmp_path / "repo"
     (copy / "tools").mkdir(parents=True)
     (copy / "tools" / SCRIPT.name).write_text(SCRIPT.read_text())
@@ -72,13 +72,13 @@ def test_lent_gpu_sweep_asks_for_the_carried_wheels(tmp_path):
         capture_output=True, text=True, env={**os.environ, "OUT": str(tmp_path)}, timeout=60,
     )  # fmt: skip
     assert result.returncode == 2
-    assert "no wheels in .whl/: run 'prepare' here and carry .whl" in result.stderr
+    assert "no wheels in .whl/: run 'prepare' on a machine with network and carry .whl" in result.stderr
     assert not (copy / "results").exists()
 
 
 def _placeholder_wheel(folder: Path) -> Path:
     """A minimal valid pure-Python wheel: the script installs whatever is carried in .whl/."""
-    name, version = "lent_gpu_placeholder", "0.1"
+    name, version = "offline_gpu_placeholder", "0.1"
     files = {
         f"{name}/__init__.py": "",
         f"{name}-{version}.dist-info/METADATA": f"Metadata-Version: 2.1\nName: {name}\nVersion: {version}\n",
@@ -102,10 +102,10 @@ def _placeholder_wheel(folder: Path) -> Path:
 
 
 @pytest.mark.slow
-def test_lent_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env_datasets, tmp_path):
+def test_offline_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env_datasets, tmp_path):
     """SWEEP_COMMAND=sweep end to end on the CPU: install, a variant's trial, archive, records.tgz.
 
-    The GPU machine's only differences are DEVICE and the wheels carried (here a placeholder, as
+    The GPU node's only differences are DEVICE and the wheels carried (here a placeholder, as
     gymnasium is already installed); about 20 s, so `make test-slow`.
     """
     copy = tmp_path / "repo"
@@ -127,7 +127,7 @@ def test_lent_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env_da
              "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
-    assert (tmp_path / "site" / "lent_gpu_placeholder").is_dir()  # the carried wheel was installed
+    assert (tmp_path / "site" / "offline_gpu_placeholder").is_dir()  # the carried wheel was installed
     trial = "DiscreteArrows-v0__dqn__tiny__3"
     [row] = [line.split("\t") for line in (out / "epochs.tsv").read_text().splitlines()[1:]]
     assert row[0] == f"runs/s/{trial}" and row[1] == "1"

@@ -479,7 +479,12 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
 
 def _leaderboard(args: argparse.Namespace) -> int:
     from tactile_braille._io import atomic_path
-    from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
+    from tactile_braille.evaluation.leaderboard import (
+        headline_markdown,
+        leaderboard_markdown,
+        load_results,
+        write_headline,
+    )
 
     reference = {}
     for item in args.reference:
@@ -489,8 +494,11 @@ def _leaderboard(args: argparse.Namespace) -> int:
         reference[task] = fingerprint
     if args.output is not None and args.output.is_dir():
         raise ValueError(f"--output {args.output} is a folder; name the page to write (e.g. leaderboard.md)")
-    page = leaderboard_markdown(load_results(args.results), title=args.title, reference=reference,
-                                strict=args.strict)  # fmt: skip
+    results = load_results(args.results)
+    page = leaderboard_markdown(results, title=args.title, reference=reference, strict=args.strict)
+    if args.headline is not None:
+        write_headline(args.headline, headline_markdown(results, reference))
+        print(f"wrote the headline table into {args.headline}")
     if args.output is None:
         print(page)
         return 0
@@ -785,6 +793,13 @@ def _add_evaluate_command(commands) -> None:
         "registered environment comes hold: the paper's protocol, the default world)",
     )
     board.add_argument("--strict", action="store_true", help="refuse results under other conditions")
+    board.add_argument(
+        "--headline",
+        type=Path,
+        metavar="PAGE",
+        help="also write the headline table (per task: the paper, our best per track, the best other "
+        "method) between PAGE's headline markers (the README's)",
+    )
     board.set_defaults(handler=_leaderboard)
 
 

@@ -17,7 +17,13 @@ from tactile_braille.cli import main
 from tactile_braille.envs.oracle import oracle_action
 from tactile_braille.envs.tasks import DISCRETE_ACTIONS
 from tactile_braille.evaluation import PolicyError, TypingReport, evaluate_policy, scoring, touch_optimum
-from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
+from tactile_braille.evaluation.leaderboard import (
+    HEADLINE_MARKERS,
+    headline_markdown,
+    leaderboard_markdown,
+    load_results,
+    write_headline,
+)
 from tactile_braille.evaluation.protocol import paper_sequences
 from tactile_braille.evaluation.results import make_result, read_result, write_result
 from tactile_braille.evaluation.runs import run_method
@@ -210,6 +216,33 @@ def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tm
             leaderboard_markdown(results, reference=bad)
     with pytest.raises(ValueError, match=r"e\.json repeats seed 0 of b\.json"):
         leaderboard_markdown([*results, ("e.json", results[1][1])])
+
+
+def test_the_headline_table_takes_the_best_of_the_paper_ours_per_track_and_the_others(arrows, tmp_path):
+    """One row per task: the paper's best row, our best per track (methods of this project's runs), and
+    the best other method, ranked as on the leaderboard; written between a page's markers only."""
+    oracle = evaluate_policy(lambda o: oracle_action(arrows), ARROWS, env=arrows)
+    results = [
+        ("a.json", make_result(oracle, method="tactile_braille DQN + HER (`fast`)", seed=0, env_steps=0)),
+        ("b.json", _result(arrows, method="tactile_braille DQN + HER (`paper`)", seed=0)),
+        ("c.json", _result(arrows, method="SB3 DQN + HER", seed=0)),
+        ("d.json", _result(arrows, method="SB3 DQN + HER", seed=1)),
+    ]
+    table = headline_markdown(results)
+    (row,) = [line for line in table.splitlines() if line.startswith("| DiscreteArrows-v0 |")]
+    paper, tactile, proprio, other = (cell.strip() for cell in row.split("|")[2:6])
+    assert paper == "1.000 in 230 steps (DQN)"  # the better of the paper's DQN and SAC_DISC rows
+    assert tactile.startswith("1.000 in ") and tactile.endswith("(DQN + HER (`fast`), 1 seed)")
+    assert proprio == "-" and other.endswith("(SB3 DQN + HER, 2 seeds)")
+    page = tmp_path / "README.md"
+    start, end = HEADLINE_MARKERS
+    page.write_text(f"intro\n{start}\nold table\n{end}\noutro\n")
+    write_headline(page, table)
+    assert page.read_text() == f"intro\n{start}\n{table}{end}\noutro\n"
+    page.write_text("no markers\n")
+    with pytest.raises(ValueError, match=r"needs the lines .* once each"):
+        write_headline(page, table)
+    assert page.read_text() == "no markers\n"
 
 
 def test_the_leaderboard_names_the_released_simulators_rules_of_a_world(continuous, env_datasets):

@@ -1,5 +1,6 @@
 #!/bin/bash
-# Session 25's first device command: install the carried wheels, check, then start one sweep in its own
+# (tools/offline_gpu_sweep.sh was named tools/lent_gpu_sweep.sh when this ran)
+# The first command on one H200 node without network (2026-11-27): install the carried wheels, check, then start one sweep in its own
 # process session (it outlives this command) of JOBS trials on CUDA for BUDGET seconds, and return.
 # command2.sh, issued at once after, waits for it and brings the records back.
 set -u
@@ -10,7 +11,7 @@ python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site_p
 PYTHONPATH=src:/tmp/site_pre TACTILE_BRAILLE_DATA=$PWD/.data python3 -c "import torch, gymnasium, tactile_braille.cli; print('preflight', torch.__version__, torch.cuda.is_available())" || exit 3
 mkdir -p /tmp/g/a
 date +%s > /tmp/g/start
-OUT=/tmp/g/a SITE=/tmp/site_a DEVICE=cuda JOBS=${JOBS:-3} setsid nohup bash tools/lent_gpu_sweep.sh run "$B" /tmp/g/archive \
+OUT=/tmp/g/a SITE=/tmp/site_a DEVICE=cuda JOBS=${JOBS:-3} setsid nohup bash tools/offline_gpu_sweep.sh run "$B" /tmp/g/archive \
     --paper --presets released --tasks ContinuousArrows-v0 --algos td3 --seeds ${SEEDS:-0 1 2} --root /tmp/g/runs \
     > /tmp/g/a/run.log 2>&1 < /dev/null &
 echo $! > /tmp/g/a.pid

@@ -1,5 +1,5 @@
 #!/bin/bash
-# Session 25's second device command: wait up to WAIT seconds for command1.sh's sweep to end, then bring
+# The second command on that node (2026-11-27): wait up to WAIT seconds for command1.sh's sweep to end, then bring
 # back its records (records.tgz: the archive of the trials that finished, and the sweep's log), its
 # epochs.tsv, every trial's progress.csv (progress.tgz) and the GPU's state half-way (smi.txt).
 set -u

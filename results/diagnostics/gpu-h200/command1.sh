@@ -1,10 +1,11 @@
 #!/bin/bash
-# Session 20's first device command: five sweeps side by side on the lent GPU machine (16 cores), each
-# through tools/lent_gpu_sweep.sh, then one tarball back.  BUDGET seconds of sweep.
+# (tools/offline_gpu_sweep.sh was named tools/lent_gpu_sweep.sh when this ran)
+# The first command on one H200 node without network (2026-11-27): five sweeps side by side (16 cores),
+# each through tools/offline_gpu_sweep.sh, then one tarball back.  BUDGET seconds of sweep.
 set -u
 cd "$(dirname "$0")/../../.."  # the repository root
 B=${BUDGET:-470}
-S=tools/lent_gpu_sweep.sh
+S=tools/offline_gpu_sweep.sh
 D=${DEV:-cuda}
 nvidia-smi -L 2>/dev/null; nproc
 python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site_pre .whl/*.whl || exit 3

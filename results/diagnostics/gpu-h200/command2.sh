@@ -1,9 +1,10 @@
 #!/bin/bash
-# Session 20's second device command: uncontended seconds an epoch, one trial on the GPU and one on the CPU.
+# (tools/offline_gpu_sweep.sh was named tools/lent_gpu_sweep.sh when this ran)
+# The second command on that node (2026-11-27): uncontended seconds an epoch, one trial on the GPU and one on the CPU.
 set -u
 cd "$(dirname "$0")/../../.."  # the repository root
 B=${BUDGET:-120}
-S=tools/lent_gpu_sweep.sh
+S=tools/offline_gpu_sweep.sh
 sweep() { local name=$1 dev=$2; shift 2
   mkdir -p "$OUT/$name"
   OUT=$OUT/$name SITE=/tmp/site_$name DEVICE=$dev JOBS=1 $S run "$B" "$@" > "$OUT/$name/run.log" 2>&1 &

@@ -1,37 +1,39 @@
 #!/usr/bin/env bash
-# Part of a benchmark sweep on a lent GPU machine (docs/evaluation.md, "On a lent GPU machine"). Those
-# machines lack gymnasium, reach no network, and are given back about 30 seconds after a command ends,
-# taking the run folders with them: so the sweep runs for a fixed budget, and what comes back is the
-# archive of the trials that finished and the epochs and seconds of every trial (finished or not).
+# A benchmark sweep on a GPU node without network access (docs/evaluation.md, "On an offline GPU
+# node"). Such a node cannot download wheels or generate what it lacks from the network, and its run
+# folders may not outlive the job: so the wheels it lacks and the default datasets are prepared
+# beforehand on a machine with network and carried to it, the sweep runs for a fixed time budget, and
+# what comes back, packed into the folder $OUT, is the archive of the trials that finished and the
+# epochs and seconds of every trial (finished or not).
 #
-#   tools/lent_gpu_sweep.sh prepare
-#       here, once: the wheels the machine lacks in .whl/, the default datasets in .data/ (both ignored
-#       by git; name them in the device tool's `carry`)
-#   tools/lent_gpu_sweep.sh run BUDGET_S ARCHIVE BENCHMARK_ARGS...
-#       there, in one command: `tactile-braille benchmark BENCHMARK_ARGS --archive ARCHIVE` on CUDA
+#   tools/offline_gpu_sweep.sh prepare
+#       on a machine with network, once: the wheels the node lacks in .whl/, the default datasets in
+#       .data/ (both ignored by git; carry both to the node with the checkout)
+#   tools/offline_gpu_sweep.sh run BUDGET_S ARCHIVE BENCHMARK_ARGS...
+#       on the node, in one job: `tactile-braille benchmark BENCHMARK_ARGS --archive ARCHIVE` on CUDA
 #       (DEVICE to change), JOBS trials side by side (default 14), stopped after BUDGET_S seconds; then
 #       ARCHIVE and the sweep's log as $OUT/records.tgz, and $OUT/epochs.tsv: each trial's folder,
-#       epochs done and mean seconds an epoch. Unpack records.tgz here and commit the records.
-#   tools/lent_gpu_sweep.sh start BUDGET_S ARCHIVE BENCHMARK_ARGS...
-#       there, in a first command: the same sweep in a process session of its own, which outlives the
-#       command (its state in STATE, default /tmp/lent_gpu_sweep); returns after about 20 s
-#   tools/lent_gpu_sweep.sh collect WAIT_S
-#       there, in the next command, issued at once (a machine idle for 30 s is given back): waits up to
-#       WAIT_S s for the started sweep, then $OUT/records.tgz and $OUT/epochs.tsv as `run` makes them,
-#       and $OUT/progress.tgz (every trial's progress.csv); a sweep still running is left to run on
+#       epochs done and mean seconds an epoch. Unpack records.tgz in the checkout and commit the records.
+#   tools/offline_gpu_sweep.sh start BUDGET_S ARCHIVE BENCHMARK_ARGS...
+#       on the node: the same sweep in a process session of its own, which outlives the command that
+#       started it (its state in STATE, default /tmp/offline_gpu_sweep); returns after about 20 s
+#   tools/offline_gpu_sweep.sh collect WAIT_S
+#       on the same node, later: waits up to WAIT_S s for the started sweep, then $OUT/records.tgz and
+#       $OUT/epochs.tsv as `run` makes them, and $OUT/progress.tgz (every trial's progress.csv); a
+#       sweep still running is left to run on
 #
 # SWEEP_COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its
 # settings and --variant NAME among the arguments).
 #
-# e.g. tools/lent_gpu_sweep.sh run 500 results/table3-v2 --paper --presets released \
+# e.g. tools/offline_gpu_sweep.sh run 500 results/table3-v2 --paper --presets released \
 #          --tasks DiscreteAlphabet-v0 --algos dqn --seeds 1 2 3 4 --precision bf16 --root runs/table3-v2
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-STATE=${STATE:-/tmp/lent_gpu_sweep}
+STATE=${STATE:-/tmp/offline_gpu_sweep}
 SWEEP_COMMAND=${SWEEP_COMMAND:-benchmark}
 
-usage() { sed -n '2,27p' "$0" >&2; exit 2; }
+usage() { sed -n '2,29p' "$0" >&2; exit 2; }
 fail() { echo "$*" >&2; exit 2; }
 
 prepare() {
@@ -55,8 +57,8 @@ check_command() {
 
 # the carried wheels installed, and the environment that finds them, the package and the datasets
 setup() {
-    ls .whl/*.whl > /dev/null 2>&1 || fail "no wheels in .whl/: run 'prepare' here and carry .whl"
-    [ -d .data ] || fail "no .data/: run 'prepare' here and carry .data"
+    ls .whl/*.whl > /dev/null 2>&1 || fail "no wheels in .whl/: run 'prepare' on a machine with network and carry .whl"
+    [ -d .data ] || fail "no .data/: run 'prepare' on a machine with network and carry .data"
     PYTHON=${PYTHON:-python3}
     local site=${SITE:-/tmp/site}
     "$PYTHON" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$site" .whl/*.whl
@@ -129,7 +131,7 @@ collect() {
     [ $# -eq 1 ] || usage
     check_budget "$1" WAIT_S
     [ -n "${OUT:-}" ] || fail "OUT is not set: where should the records go?"
-    [ -f "$STATE/pid" ] || fail "no sweep was started in $STATE: run 'start' first, on this same machine"
+    [ -f "$STATE/pid" ] || fail "no sweep was started in $STATE: run 'start' first, on this same node"
     PYTHON=${PYTHON:-python3}
     local pid waited=0
     pid=$(cat "$STATE/pid")
