@@ -1,6 +1,6 @@
 """Every error a user can cause ends in one line and exit status 2, before anything is written.
 
-A table of the inputs issue 19 found ending in tracebacks or in folders that then blocked a re-run,
+A table of the inputs a review found ending in tracebacks or in folders that then blocked a re-run,
 each run through ``tactile_braille.cli.main`` as the shell runs it.
 """
 

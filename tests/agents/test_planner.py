@@ -318,7 +318,7 @@ def discrete_observation_space():
 
 def test_a_record_of_a_retired_planner_setting_reads_only_with_the_value_the_code_still_runs():
     stored = TrainConfig(task=DISCRETE_TASK, algo="planner").to_json()
-    stored["agent"] = {**stored["agent"], "backtrack_readings": 0.0}  # as the session-32 records hold it
+    stored["agent"] = {**stored["agent"], "backtrack_readings": 0.0}  # as the records of 2026-12-01 hold it
     assert TrainConfig.from_json(stored) == TrainConfig(task=DISCRETE_TASK, algo="planner")
     stored["agent"]["backtrack_readings"] = 1.0
     with pytest.raises(ValueError, match=r"agent\.backtrack_readings=1\.0: this setting was removed"):

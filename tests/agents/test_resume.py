@@ -1,6 +1,6 @@
 """Run folders are reliable: one writer at a time, and resumes that never drop history.
 
-Each case here failed before the fix it tests (issue 19): two resumes ran side by side, ``--epochs``
+Each case here failed before the fix it tests: two resumes ran side by side, ``--epochs``
 was ignored on a resume, a missing checkpoint restarted the run at epoch 0, and a damaged checkpoint
 or replay file ended in a traceback.
 """

@@ -262,7 +262,7 @@ def test_import_refuses_to_overwrite(recording, tmp_path):
 
 
 def test_a_nan_pose_stops_the_import_cleanly_and_restart_recovers_after_the_fix(recording, tmp_path):
-    """Issue 19: a NaN once left a bad shard that no resume or re-run could get past."""
+    """A NaN once left a bad shard that no resume or re-run could get past."""
     from tactile_braille.datasets.store import ResumeMismatchError, partial_path
 
     rows = [dict(row) for row in recording["rows"]]

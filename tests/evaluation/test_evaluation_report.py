@@ -135,7 +135,7 @@ def test_coverage_counts_only_full_runs_of_a_presets_own_settings():
 
 
 def test_a_continuous_run_in_our_world_is_named_so_and_not_counted():
-    """Since session 22 the paper's presets take the released simulator's workspace edge and depth
+    """Since 2026-11-27 the paper's presets take the released simulator's workspace edge and depth
     lookup on the continuous tasks; the runs made before, in ours, depart from them."""
     task = "tactile_braille/ContinuousArrows-v0"
     stopped = replace_settings(
