@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 OUT ?= outputs
 
-.PHONY: run test test-slow lint bench results clean
+.PHONY: run test test-slow lint bench results docs clean
 
 # torch is pinned to the version whose CPU build the project's machines hold; a looser
 # pin would download gigabytes of CUDA packages. Elsewhere, for the CPU wheel:
@@ -40,6 +40,11 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(PY) -m pip install --quiet -e ".[dev,sweep]"
 	$(PY) -m pytest -q -m slow
+
+# The documentation site (mkdocs.yml) into $(OUT)/site; strict: a warning (a broken link between pages,
+# an unknown anchor, a docstring that contradicts its signature) fails the build. CI builds it too.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir $(OUT)/site
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .

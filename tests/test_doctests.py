@@ -24,7 +24,12 @@ def _modules_with_examples() -> list[str]:
 
 
 MODULES = _modules_with_examples()
-SLOW = {"tactile_braille.envs.continuous", "tactile_braille.agents.rollout", "tactile_braille.sensor.batched"}
+SLOW = {
+    "tactile_braille.envs.continuous",
+    "tactile_braille.envs.discrete",
+    "tactile_braille.agents.rollout",
+    "tactile_braille.sensor.batched",
+}
 """Modules whose examples make environments or render (seconds each): run by ``make test-slow``."""
 
 

@@ -500,8 +500,9 @@ class EpisodeReplayBuffer:
             for the frames of the episode in progress).
         relabel: ``"paper"`` (store copies of wrong-press episodes) or
             ``"all"`` (relabel when sampling, see above).
-        relabel_final, relabel_random: with ``"all"``, the probabilities that
-            a sampled transition takes its episode's pressed key, or a random goal.
+        relabel_final: with ``"all"``, the probability that a sampled transition takes its
+            episode's pressed key as its goal.
+        relabel_random: with ``"all"``, the probability that it takes a uniformly random goal.
         observation_shape: ``(H, W, 1)`` for binary images (bit-packed; ``(100, 100, 1)``
             by default), ``(n,)`` for feature vectors.
         n_step: steps of an episode a sampled transition's return spans (1: one-step
