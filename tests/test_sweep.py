@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -147,6 +148,34 @@ def test_two_tiny_trials_on_a_local_ray(env_datasets, tmp_path):
         rows = read_progress(run)
         assert len(rows) == 1 and rows[0]["env_steps"] == 30
         assert f"__{seed}" in run.name
+
+
+@pytest.mark.slow
+def test_trials_run_on_a_ray_cluster_given_by_its_address(env_datasets, tmp_path):
+    """A Ray cluster started apart (``ray start --head``, as on a cluster's head machine), the sweep joining
+    it by ``address``: the recipe of docs/evaluation.md on one machine. Every node must see ``root``.
+    ``ray stop`` at the end stops every Ray of this machine: run it where no other Ray is wanted."""
+    pytest.importorskip("ray")
+    import shutil
+    import socket
+    import subprocess
+    import sys
+
+    ray_command = shutil.which("ray", path=str(Path(sys.executable).parent))
+    assert ray_command, "Ray's command line comes with the sweep extra"
+    with socket.socket() as probe:  # a free port for the head
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    head = [ray_command, "start", "--head", f"--port={port}", "--num-cpus=2", "--include-dashboard=false"]
+    subprocess.run(head, check=True, capture_output=True, timeout=120)
+    try:
+        dataset = str(env_datasets["tactile_braille/DiscreteArrows-v0"])
+        trials = plan(["DiscreteArrows-v0"], ["dqn"], [0, 1], dataset=dataset, **TINY)
+        runs = sweep(trials, tmp_path / "root", use_ray=True, address=f"127.0.0.1:{port}", cpus_per_trial=1,
+                     progress=False)  # fmt: skip
+        assert [len(read_progress(run)) for run in runs] == [1, 1]
+    finally:
+        subprocess.run([ray_command, "stop", "--force"], capture_output=True, timeout=120)
 
 
 def test_ray_asked_for_but_not_installed_is_refused_before_anything_is_made(tmp_path, monkeypatch):
