@@ -56,27 +56,35 @@ bench: $(STAMP)
 	$(PY) benchmarks/separability.py
 	$(PY) benchmarks/train_throughput.py
 
-# docs/results.md, generated whole from the runs' records committed under results/ (settings, world,
+# The results pages, generated whole from the runs' records committed under results/ (settings, world,
 # progress and typing of each run; no checkpoints: `tactile-braille benchmark ... --archive results/...`
-# and `tactile-braille archive` write them). Runs on any machine, no training needed.
-# docs/leaderboard.md ranks those records and the results files of other libraries' agents
-# (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md), and puts its
+# and `tactile-braille archive` write them). Runs on any machine, no training needed, and rewrites the
+# same bytes from the same records (python -m tactile_braille.evaluation.results_pages):
+# - docs/results.md: figures, one row per preset, task and agent against the paper's Table III and the
+#   typing bound, Table III's coverage, docs/results-notes.md (a reading of them; the long account is
+#   docs/notes/results-account.md), and the sections on transfer and warm starts;
+# - docs/results-ablations.md: the rows whose settings depart from their preset, and results/ablation-*/
+#   (a preset with one part taken away or changed), grouped by preset;
+# - docs/results-runs.md: each row's runs and typing confusion;
+# - docs/results-tuning.md: results/tuning/ (the runs settings were chosen on; their seeds are not
+#   reported) and results/diagnostics/ (runs that test a cause, some stopped early), a row per record.
+# results/transfer/ holds runs typed in other worlds (evaluate --world), results/warm-start/ warm starts
+# (train --init-from) and their sources: a section each on docs/results.md.
+# docs/leaderboard.md ranks the records (not the ablations) and the results files of other libraries'
+# agents (results/leaderboard/, written by examples/) per task and track (docs/benchmark.md), and puts its
 # headline table (per task: the paper, our best per track, the best other method) into README.md.
-# results/tuning/ holds the runs settings were chosen on (their seeds are not reported), and
-# results/diagnostics/ runs that test a cause (some stopped early): both left out here.
-# results/transfer/ holds runs typed in other worlds (evaluate --world): their own section.
-# results/warm-start/ holds warm starts (train --init-from) and their sources: their own section too.
 ALL_RECORDS = $(sort $(patsubst %/,%,$(dir $(wildcard results/*/*/config.json results/*/*/*/config.json))))
 RECORDS = $(filter-out results/tuning/% results/diagnostics/% results/transfer/% results/warm-start/%,$(ALL_RECORDS))
 TRANSFER = $(filter results/transfer/%,$(ALL_RECORDS))
 WARM = $(filter results/warm-start/%,$(ALL_RECORDS))
-# results/ablation-*/ hold ablations (a preset with one part taken away or changed): tabled, not ranked.
+ABLATIONS = $(filter results/ablation-%,$(RECORDS))
 RANKED = $(filter-out results/ablation-%,$(RECORDS))
 RESULT_FILES = $(sort $(wildcard results/leaderboard/*/*.json))
 results: $(STAMP)
-	$(TB) report $(RECORDS) --output docs/results.md $(if $(TRANSFER),--transfer $(TRANSFER)) \
-		$(if $(WARM),--warm-start $(WARM)) \
-		--notes docs/results-notes.md --title "Results: Table III with the paper's and the released code's settings"
+	$(PY) -m tactile_braille.evaluation.results_pages $(RANKED) --ablations $(ABLATIONS) \
+		--transfer $(TRANSFER) --warm-start $(WARM) --tuning results/tuning --diagnostics results/diagnostics \
+		--notes docs/results-notes.md --output docs/results.md \
+		--title "Results: Table III with the paper's settings, the released code's and ours"
 	$(TB) leaderboard $(RANKED) $(RESULT_FILES) --output docs/leaderboard.md --headline README.md \
 		--title "Leaderboard: typing on the braille keyboard"
 

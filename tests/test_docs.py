@@ -1,7 +1,7 @@
 """The hand-written pages' links resolve: every relative link names a file of the checkout, and
 every ``#anchor`` a heading of the page it points to (GitHub's heading slugs).
 
-docs/results.md and docs/leaderboard.md are generated (``make results``) and left out: their prose
+docs/results*.md and docs/leaderboard.md are generated (``make results``) and left out: their prose
 comes from docs/results-notes.md, checked here, and a stale link there is fixed by regenerating them.
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-GENERATED = {"results.md", "leaderboard.md"}
+GENERATED = {"results.md", "results-ablations.md", "results-runs.md", "results-tuning.md", "leaderboard.md"}
 PAGES = sorted(p for p in [ROOT / "README.md", *(ROOT / "docs").glob("*.md")] if p.name not in GENERATED)
 LINK = re.compile(r"\]\(([^)\s#]*)(?:#([^)\s]+))?\)")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,10 +14,10 @@ from tactile_braille.agents.presets import preset_config
 from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
-    _coverage_section,
     _reached_cell,
     bootstrap_ci,
     compared_groups,
+    coverage_section,
     coverage_table,
     departures,
     grid_label,
@@ -128,10 +129,10 @@ def test_coverage_counts_only_full_runs_of_a_presets_own_settings():
     assert rows["cont alpha, SAC", "paper"].endswith("| 1 | 120 | 3 x 100 (of 2,000) | 2 more seeds |")
     assert rows["disc arrow, SAC_DISC", "released"].endswith("| 0 | - | 5 x 25 | not run |")
     # A report with a run of the paper's presets carries the table; one of other presets' runs does not.
-    assert _coverage_section(group(records))[0].startswith("### Table III coverage")
+    assert coverage_section(group(records))[0].startswith("### Table III coverage")
     fast = record("DiscreteAlphabet-v0", "dqn", 0, [0.5] * 100)
     fast.config = preset_config("fast", task, "dqn")
-    assert _coverage_section(group([fast])) == []
+    assert coverage_section(group([fast])) == []
 
 
 def test_a_continuous_run_in_our_world_is_named_so_and_not_counted():
@@ -357,3 +358,145 @@ def test_the_by_task_figure_draws_rows_of_five_seeds_or_more(tmp_path):
     assert plot_by_task(groups, tmp_path / "by_task.png").read_bytes()[:4] == b"\x89PNG"
     assert plot_by_task(group(three), tmp_path / "none.png") is None  # an ablation alone: no figure
     assert not (tmp_path / "none.png").exists()
+
+
+# ------------------------------------------------------------------ the repository's results pages
+def write_record(folder, config, seed, returns, accuracy, steps):
+    """A run record as ``tactile-braille archive`` leaves it (no checkpoint): settings, world, progress
+    log and typing, both protocols, with its confusion and typing bound."""
+    from tactile_braille.agents.run import write_config
+    from tactile_braille.datasets.collector import GENERATOR_VERSION
+
+    folder.mkdir(parents=True)
+    write_config(folder, replace_settings(config, {"seed": seed}))
+    (folder / "world.json").write_text(json.dumps({"generator_version": GENERATOR_VERSION}))
+    rows = ["epoch,test/episodic_return,time_s", *(f"{i},{r},60.0" for i, r in enumerate(returns))]
+    (folder / "progress.csv").write_text("\n".join(rows) + "\n")
+    confusion = {"rows": ["UP", "DOWN"], "columns": ["UP", "DOWN", "OTHER", "NONE"],
+                 "counts": [[48, 0, 0, 0], [0, 48, 0, 0]]}  # fmt: skip
+    typed = {"accuracy": accuracy, "total_steps": steps, "keys_asked": 96, "typing_bound": 242.0}
+    reset = {**typed, "total_steps": steps - 10, "typing_bound": 224.0}
+    typing = {
+        **typed,
+        "checkpoint_epoch": len(returns) - 1,
+        "confusion": confusion,
+        "released_protocol": reset,
+    }
+    (folder / "typing.json").write_text(json.dumps(typing))
+    return folder
+
+
+@pytest.fixture
+def records_tree(tmp_path):
+    """Records of a preset's own runs, of a departure, of an ablation, of tuning and of diagnostics."""
+    task = "tactile_braille/DiscreteArrows-v0"
+    paper = preset_config("paper", task, "dqn", precision="bf16")
+    relabel = replace_settings(paper, {"replay": {"relabel": "all"}})
+    fast = preset_config("fast", task, "dqn")
+    results = tmp_path / "results"
+    runs = [
+        write_record(results / "table3" / f"p_{s}", paper, s, [0.5, 0.96, 1.0], 1.0, 250 + s) for s in (0, 1)
+    ]
+    runs += [write_record(results / "fast" / f"f_{s}", fast, s, [0.97, 1.0], 1.0, 242) for s in (0, 1)]
+    runs += [write_record(results / "relabel" / f"r_{s}", relabel, s, [0.9, 1.0], 1.0, 245) for s in (0, 1)]
+    ablations = [write_record(results / "ablation-x" / "p_7", paper, 7, [0.2, 0.5], 0.5, 400)]
+    write_record(results / "tuning" / "DAr_relabel-all_100", relabel, 100, [0.3, 0.96], 1.0, 250)
+    study = results / "diagnostics" / "gpu-node"
+    write_record(study / "DiscreteArrows-v0__dqn__0", paper, 0, [0.4, 0.97], 1.0, 269)
+    (study / "README.md").write_text("# GPU wall-clock: one node (2026-11-27)\n\nWhat ran.\n")
+    (study / "epochs.tsv").write_text("trial\tseconds\n")
+    write_record(results / "diagnostics" / "DA_single_0", paper, 0, [0.1, 0.2], 0.3, 900)
+    return tmp_path, runs, ablations
+
+
+def test_a_presets_own_rows_are_the_headline_and_the_rest_depart(records_tree):
+    from tactile_braille.evaluation.results_pages import departure_text, preset_of, split_groups
+
+    _, runs, ablations = records_tree
+    own, departed = split_groups(load_records(runs), load_records(ablations))
+    assert [key[2] for key in own] == ["fast, fp32", "paper, bf16"]
+    assert [len(records) for records in own.values()] == [2, 2]
+    # A departure is named by what differs; an ablation's runs depart even with the preset's own settings.
+    assert [key[2] for key in departed] == [
+        "paper, bf16, replay.relabel=all",
+        "paper, bf16, run as an ablation",
+    ]
+    assert [len(records) for records in departed.values()] == [2, 1]
+    assert departure_text("paper, bf16, replay.relabel=all, taps=2") == "replay.relabel=all, taps=2"
+    assert departure_text("paper, bf16") == "" and preset_of("fast-tactile, fp32, x=1") == "fast-tactile"
+
+
+def test_the_results_pages_are_written_whole_and_again_byte_for_byte(records_tree, monkeypatch, capsys):
+    from tactile_braille.evaluation.results_pages import main
+
+    root, runs, ablations = records_tree
+    monkeypatch.chdir(root)  # the Makefile's paths: relative to the checkout
+    docs = Path("docs")
+    docs.mkdir()
+    (docs / "notes").mkdir()
+    (docs / "notes" / "results-account.md").write_text("# The account\n")
+    (docs / "results").mkdir()
+    (docs / "results" / "confusion_gone.png").write_bytes(b"old")  # a figure of a row no longer reported
+    (docs / "results-runs.md").write_text("![a](results/confusion_gone.png)\n")
+    (docs / "notes.md").write_text("## Reading the table\n\nRead **this**.\n")
+    argv = [*(str(Path(r).relative_to(root)) for r in runs), "--ablations",
+            *(str(Path(r).relative_to(root)) for r in ablations), "--tuning", "results/tuning",
+            "--diagnostics", "results/diagnostics", "--notes", "docs/notes.md",
+            "--title", "Results here"]  # fmt: skip
+    assert main(argv) == 0
+    pages = ["results.md", "results-ablations.md", "results-runs.md", "results-tuning.md"]
+    assert [line.split()[1] for line in capsys.readouterr().out.splitlines()] == [f"docs/{p}" for p in pages]
+    text = {page: (docs / page).read_text() for page in pages}
+    for page in pages:  # each page links every other near its top, and the account beside them
+        top = text[page].split("\n\n", 3)
+        assert all(f"]({other})" in "\n".join(top[:3]) for other in pages if other != page), page
+        assert "](notes/results-account.md)" in text[page]
+    headline = text["results.md"]
+    assert headline.startswith("# Results here\n")
+    assert "### `paper`: the paper's settings" in headline and "### `fast`: ours" in headline
+    assert headline.index("## Track `tactile`") < headline.index("## Track `proprio`")
+    assert (
+        "| disc arrow | DQN | 2 | 250 [250, 251] | 242 | 1.000 [1.000, 1.000] | 240 [240, 241] | 224 |"
+        in headline
+    )
+    assert "relabel" not in headline.split("## Table III coverage")[0]  # departures are not headline rows
+    assert (
+        headline.index("![steps per key") < headline.index("| disc arrow |") < headline.index("Read **this**")
+    )
+    ablated = text["results-ablations.md"]
+    assert "## Departures from `paper` (track `tactile`)" in ablated
+    rows = [line for line in ablated.splitlines() if line.startswith("| disc arrow")]
+    assert [row.split(" | ")[2] for row in rows] == [
+        "none: the preset's own row", "replay.relabel=all", "run as an ablation"
+    ]  # fmt: skip
+    assert rows[2].endswith("| `results/ablation-x/` |")  # an ablation with the preset's settings
+    assert "## DiscreteArrows-v0, DQN (paper, bf16, replay.relabel=all)" in text["results-runs.md"]
+    tuning = text["results-tuning.md"]
+    assert (
+        "| `DAr_relabel-all_100` | disc arrow | DQN | paper, bf16, replay.relabel=all | tactile | 100 |"
+        in tuning
+    )
+    assert "### `gpu-node/`: GPU wall-clock: one node (2026-11-27)" in tuning
+    assert "[Its README](../results/diagnostics/gpu-node/README.md)" in tuning and "`epochs.tsv`" in tuning
+    assert "| `DA_single_0` | disc arrow | DQN | paper, bf16 |" in tuning.split("### Single runs")[1]
+    figures = sorted(p.name for p in (docs / "results").iterdir())
+    assert "confusion_gone.png" not in figures  # linked before, not now: removed
+    assert {"steps_per_key.png", "curves.png", "ablations.png"} <= set(figures)  # by task: 5 seeds a row
+    before = {p: p.read_bytes() for p in [*docs.glob("results*.md"), *(docs / "results").iterdir()]}
+    assert main(argv) == 0
+    assert {p: p.read_bytes() for p in [*docs.glob("results*.md"), *(docs / "results").iterdir()]} == before
+
+
+def test_the_pages_figures_draw_nothing_without_rows(tmp_path):
+    from tactile_braille.evaluation.results_pages import (
+        plot_departures,
+        plot_preset_curves,
+        plot_steps_per_key,
+    )
+
+    assert plot_steps_per_key({}, tmp_path / "a.png") is None
+    assert plot_preset_curves({}, tmp_path / "b.png") is None
+    assert plot_departures({}, {}, tmp_path / "c.png") is None
+    untyped = group([record("DiscreteArrows-v0", "dqn", 0, [0.5, 1.0])])
+    assert plot_steps_per_key(untyped, tmp_path / "d.png") is None
+    assert not list(tmp_path.iterdir())

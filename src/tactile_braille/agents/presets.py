@@ -71,7 +71,7 @@ class TaskPresets:
             a group as a dict of its settings).
         planner_epochs: the planner's epochs (``fast-tactile``) where they are not
             ``fast_tactile_epochs``: on the continuous alphabet twice the first epoch at 0.95 of its
-            tuning seed (30), where ``fast-tactile``'s 290 are the issue's target for the paper's 872.
+            tuning seed (30), where ``fast-tactile``'s 290 are a third of the paper's 872.
         planner_agent: the planner's settings on this task beyond its action kind's
             (:func:`planner_changes` says why).
     """
@@ -267,8 +267,8 @@ def planner_changes(task: str) -> dict[str, Any]:
     are 18 mm (``move`` 0.9), shorter than nearly every key along a row. On the discrete tasks its
     backtracking weighs each state by how often it is occupied (``backtrack_prior``); on the discrete
     tasks and the continuous alphabet a move into the generic *nothing* is worth none of that state's
-    value (``lost_value`` 0). Each was tuned on seeds 100-102; docs/agents.md ("The key-graph
-    planner") has the measurements behind each."""
+    value (``lost_value`` 0). Each was tuned on seeds 100-102; docs/notes/key-graph-planner.md and
+    docs/notes/key-graph-planner-continuous.md have the measurements behind each."""
     spec, presets = task_presets(task)
     epochs = presets.fast_tactile_epochs if presets.planner_epochs is None else presets.planner_epochs
     changes: dict[str, Any] = {

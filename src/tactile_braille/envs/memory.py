@@ -1,8 +1,8 @@
 """Tap memory: the agent's own recent observations, stacked into each observation.
 
 The paper's agents see one tactile image and the previous action. A single
-light tap often says little about where the sensor is (docs/agents.md, "What
-was tried"); with the last ``taps`` images and the moves between them, a
+light tap often says little about where the sensor is (docs/notes/tactile-track.md,
+"Perception is the first bottleneck"); with the last ``taps`` images and the moves between them, a
 policy can read where it is from a short history, as a person feeling for a
 key does. Everything stacked is the environment's own observation dictionary
 at earlier steps, so a run with memory stays on the ``tactile`` track.

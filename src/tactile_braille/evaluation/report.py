@@ -8,7 +8,9 @@ confidence interval and the interquartile mean (IQM, the mean of the middle
 half, as rliable recommends for few seeds); training curves with the seed
 range, the convergence marker and the original release's logged run overlaid;
 typing confusion matrices; and the paper's Figure 4 (the sensor's path to the
-goal at the start, middle and end of training).
+goal at the start, middle and end of training). The repository's own results
+pages (``make results``) are written from the same pieces by
+:mod:`~tactile_braille.evaluation.results_pages`.
 """
 
 from __future__ import annotations
@@ -289,35 +291,53 @@ def results_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     return "\n\n".join(f"### {TRACK_TITLES.get(t, t)}\n\n" + _track_table(tracks[t]) for t in ordered)
 
 
-def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
-    lines = [
-        "| env | task | algo | track | seeds | steps | optimal steps | accuracy | steps, reset per key "
-        "| optimal steps, reset per key | accuracy, reset per key | convergence epoch | first epoch >= 0.95 "
-        "| paper: steps | paper: accuracy | paper: convergence |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+TYPING_COLUMNS = (
+    "steps", "typing bound", "accuracy", "steps, reset per key", "typing bound, reset per key",
+    "accuracy, reset per key", "convergence epoch", "first epoch >= 0.95",
+)  # fmt: skip
+"""The columns of :func:`typing_cells`: typing under the paper's text protocol (no reset between keys) and
+the released code's (a reset per key), each beside its typing bound, then the two convergence epochs."""
+PAPER_COLUMNS = ("paper: steps", "paper: accuracy", "paper: convergence")
+"""The columns of :func:`paper_cells`: the paper's Table III (simulation)."""
+
+
+def typing_cells(records: list[RunRecord]) -> list[str]:
+    """A group's cells under :data:`TYPING_COLUMNS`: mean over seeds [95 % CI] (IQM from 4 seeds)."""
+    typed = [r.typing for r in records if r.typing]
+    reset = [t["released_protocol"] for t in typed if "released_protocol" in t]
+    return [
+        _stat([t["total_steps"] for t in typed], 0),
+        _bound_cell([run_bound(r, "paper") for r in records if r.typing]),
+        _stat([t["accuracy"] for t in typed], 3),
+        _stat([t["total_steps"] for t in reset], 0),
+        _bound_cell(
+            [run_bound(r, "released") for r in records if r.typing and "released_protocol" in r.typing]
+        ),
+        _stat([t["accuracy"] for t in reset], 3),
+        _stat([r.convergence for r in records], 1),
+        _reached_cell([r.reached_095 for r in records], [len(r.returns) for r in records]),
     ]
-    for (task, algo, variant), records in groups.items():
-        typed = [r.typing for r in records if r.typing]
-        steps = _stat([t["total_steps"] for t in typed], 0)
-        accuracy = _stat([t["accuracy"] for t in typed], 3)
-        reset = [t["released_protocol"] for t in typed if "released_protocol" in t]
-        reset_steps = _stat([t["total_steps"] for t in reset], 0)
-        bound = _bound_cell([_bound(r, "paper") for r in records if r.typing])
-        reset_bound = _bound_cell(
-            [_bound(r, "released") for r in records if r.typing and "released_protocol" in r.typing]
-        )
-        reset_accuracy = _stat([t["accuracy"] for t in reset], 3)
-        convergence = _stat([r.convergence for r in records], 1)
-        reached_text = _reached_cell([r.reached_095 for r in records], [len(r.returns) for r in records])
-        paper = PAPER_TABLE.get(("sim", task, algo))
-        paper_cells = [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
-        lines.append(
-            f"| sim | {TASK_NAMES.get(task, task)} | {_label(algo, variant)} | {records[0].track} "
-            f"| {len(records)} | {steps} | {bound} | {accuracy} | {reset_steps} | {reset_bound} "
-            f"| {reset_accuracy} | {convergence} "
-            f"| {reached_text} | " + " | ".join(paper_cells) + " |"
-        )
-    return "\n".join(lines)
+
+
+def paper_cells(task: str, algo: str) -> list[str]:
+    """The paper's Table III row of ``task`` and ``algo`` (simulation) under :data:`PAPER_COLUMNS`."""
+    paper = PAPER_TABLE.get(("sim", task, algo))
+    return [str(paper[0]), f"{paper[1]:.3f}", str(paper[2])] if paper else ["-", "-", "-"]
+
+
+def markdown_table(header: list[str] | tuple[str, ...], rows: list[list[str]]) -> str:
+    """A Markdown table of ``rows`` under ``header``."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join([*lines, *("| " + " | ".join(row) + " |" for row in rows)])
+
+
+def _track_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
+    rows = [
+        ["sim", TASK_NAMES.get(task, task), _label(algo, variant), records[0].track, str(len(records)),
+         *typing_cells(records), *paper_cells(task, algo)]
+        for (task, algo, variant), records in groups.items()
+    ]  # fmt: skip
+    return markdown_table(("env", "task", "algo", "track", "seeds", *TYPING_COLUMNS, *PAPER_COLUMNS), rows)
 
 
 TABLE3_SEEDS = 5
@@ -370,16 +390,22 @@ def coverage_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     return "\n".join(lines)
 
 
-def _coverage_section(groups: dict[tuple[str, str, str], list[RunRecord]]) -> list[str]:
-    """The report's lines on how complete Table III is (:func:`coverage_table` under its heading); none
-    for a report without a run of the paper's presets (the table would only say "not run")."""
+def coverage_section(
+    groups: dict[tuple[str, str, str], list[RunRecord]],
+    elsewhere: str = "in the tables above",
+    level: int = 3,
+) -> list[str]:
+    """The report's lines on how complete Table III is (:func:`coverage_table` under a heading of
+    ``level``); none for a report without a run of the paper's presets (the table would only say "not
+    run"). ``elsewhere`` says where the rows of runs that depart from a preset are."""
     if not any(variant.split(",")[0] in TABLE3_PRESETS for _, _, variant in groups):
         return []
     return [
-        "### Table III coverage: seeds per row with the paper's and the released code's settings", "",
+        "#" * level + " Table III coverage: seeds per row with the paper's and the released code's "
+        "settings", "",
         "Runs with the preset's own settings to its full epochs (the continuous alphabet's 2,000 are "
         "asked only as far as compute allows); rows of an earlier `released` preset, or of runs that "
-        "change a setting, are in the tables above but not counted here.", "",
+        f"change a setting, are {elsewhere} but not counted here.", "",
         coverage_table(groups), "",
     ]  # fmt: skip
 
@@ -429,22 +455,33 @@ def transfer_table(groups: dict[tuple[str, str, str], list[RunRecord]]) -> str:
     return "\n".join(lines)
 
 
-def _transfer_section(transfer_dirs) -> list[str]:
-    """The report's lines on the runs typed in other worlds (none without such runs)."""
+def run_list(records: list[RunRecord]) -> list[str]:
+    """A line per run: its folder, seed and epochs (and a warm start's source)."""
+    return [
+        f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs"
+        + (f", warm start from `{Path(r.init['run']).name}` ({r.init['epochs']} epochs)" if r.init else "")
+        for r in records
+    ]
+
+
+def transfer_section(transfer_dirs, runs_page: str | None = None) -> list[str]:
+    """The report's lines on the runs typed in other worlds (none without such runs); the runs are
+    listed below the table, or, given ``runs_page`` (a link), there."""
     moved = group(load_records(transfer_dirs, evaluate_missing=False)) if transfer_dirs else {}
     runs = [r for records in moved.values() for r in records if r.transfer]
     if not runs:
         return []
-    listed = [f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs" for r in runs]
+    where = f"listed on [the runs page]({runs_page})" if runs_page else "listed below the table"
+    listed = [] if runs_page else [*run_list(runs), ""]
     return [
         "## Transfer: typing in worlds the policies did not learn in", "",
-        "Runs of their own (listed below the table), trained on the dataset backend (or, where the row "
+        f"Runs of their own ({where}), trained on the dataset backend (or, where the row "
         "says so, the render backend, and there with the work frame off by a random error each episode: "
         "'frame noise') and typed "
         "(`tactile-braille evaluate RUN --world transfer`, the paper's protocol) in the live renderer "
         "(`render`), in it with the work frame off by 1 mm and 2 degrees (`frame:DX,DY,DEG`), and "
         "with the other TacTip (`sensor:tactip_127`); docs/evaluation.md says what this does and "
-        "does not show.", "", transfer_table(moved), "", *listed, "",
+        "does not show.", "", transfer_table(moved), "", *listed,
     ]  # fmt: skip
 
 
@@ -486,27 +523,27 @@ def _accuracy_after(records: list[RunRecord]) -> str:
     return f"{_stat([r.typing['accuracy'] for r in typed], 3)} after {epochs} epochs"
 
 
-def _warm_start_section(warm_dirs, cold: dict, figures: Path, link: str, written: set[str]) -> list[str]:
-    """The report's lines on warm-started runs (none without such runs); its figure joins ``written``."""
+def warm_start_section(
+    warm_dirs, cold: dict, figures: Path, link: str, written: set[str], runs_page: str | None = None
+) -> list[str]:
+    """The report's lines on warm-started runs (none without such runs); its figure joins ``written``.
+    The runs are listed below the figure, or, given ``runs_page`` (a link), there."""
     records = load_records(warm_dirs, evaluate_missing=False) if warm_dirs else []
     warm = group([r for r in records if r.init is not None])
     if not warm:
         return []
     figure = plot_warm_starts(warm, cold, figures / "warm_starts.png").name
     written.add(figure)
-    listed = [
-        f"- `{r.path}`: seed {r.seed}, {len(r.returns)} epochs"
-        + (f", warm start from `{Path(r.init['run']).name}` ({r.init['epochs']} epochs)" if r.init else "")
-        for r in records
-    ]
+    where = f"listed on [the runs page]({runs_page})" if runs_page else "listed below"
+    listed = [] if runs_page else [*run_list(records), ""]
     return [
         "## Warm starts: learning on the paper's grid after a coarser one", "",
         "The paper's Discussion: policies trained on a 6 mm grid sped up learning on the 3 mm grid. "
-        "Runs of their own (listed below), each started (`tactile-braille train ... --init-from RUN`) "
+        f"Runs of their own ({where}), each started (`tactile-braille train ... --init-from RUN`) "
         "from the last checkpoint of a run on a coarser grid (its networks, optimisers, temperature and "
         "touch encoder; not its replay), beside the same settings started from scratch in Table III. "
         "Epochs count from the warm start; the pretraining's are counted too, in their own columns.",
-        "", warm_start_table(warm, cold), "", f"![warm starts]({link}{figure})", "", *listed, "",
+        "", warm_start_table(warm, cold), "", f"![warm starts]({link}{figure})", "", *listed,
     ]  # fmt: skip
 
 
@@ -541,7 +578,7 @@ def plot_warm_starts(warm: dict, cold: dict, path: str | Path) -> Path:
     return save_figure(fig, path)
 
 
-def _bound(record: RunRecord, protocol: str) -> float | None:
+def run_bound(record: RunRecord, protocol: str) -> float | None:
     """The typing bound of a record's evaluation (:mod:`~tactile_braille.evaluation.bounds`): as its
     typing.json recorded it, or computed for records evaluated before bounds existed (in the default
     dataset's world when it is the record's; None otherwise)."""
@@ -690,39 +727,55 @@ def compared_groups(groups: dict[tuple[str, str, str], list[RunRecord]]) -> dict
     return tasks
 
 
+def first_095_text(records: list[RunRecord]) -> str:
+    """``first 0.95 at 4.2`` (the mean over seeds), or ``3/5 seeds reach 0.95`` where some do not."""
+    reached = [r.reached_095 for r in records]
+    if None not in reached:
+        return f"first 0.95 at {np.mean(reached):.1f}"
+    return f"{sum(e is not None for e in reached)}/{len(reached)} seeds reach 0.95"
+
+
+def panels_with_legends(entries: list[int], columns: int = 2, width: float = 7.0, height: float = 3.6):
+    """A figure of ``len(entries)`` panels, ``columns`` to a row, each with its legend in a row of its own
+    below it, tall enough for the row's longest legend (``entries``: each panel's legend lines), so that
+    no legend covers a curve. Returns the figure, the panels' axes and the legends' axes (blank)."""
+    from tactile_braille._figures import new_figure
+
+    columns = min(len(entries), columns)
+    rows = int(np.ceil(len(entries) / columns))
+    legend_rows = [max(entries[r * columns : (r + 1) * columns]) * 0.13 + 0.1 for r in range(rows)]
+    heights = [h for legend in legend_rows for h in (height, legend)]
+    fig, grid = new_figure(2 * rows, columns, figsize=(width * columns, sum(heights) + 0.8),
+                           gridspec_kw={"height_ratios": heights})  # fmt: skip
+    axes, legends = grid[0::2].ravel(), grid[1::2].ravel()
+    for ax in (*axes[len(entries) :], *legends):
+        ax.axis("off")
+    return fig, axes[: len(entries)], legends[: len(entries)]
+
+
 def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str | Path) -> Path | None:
     """One panel per task: the mean test return of every group of that task run with at least
     :data:`COMPARED_SEEDS` seeds (its seed range shaded), solid for the ``tactile`` track and dashed
     for ``proprio``, over the original release's logged runs. Fewer-seed groups (ablations, tuning)
     are left to :func:`plot_curves`. None (and nothing written) where no group has the seeds."""
-    from tactile_braille._figures import new_figure, save_figure
+    from tactile_braille._figures import save_figure
 
     tasks = compared_groups(groups)
     if not tasks:
         return None
     originals = original_curves()
-    columns = min(len(tasks), 2)
-    rows = int(np.ceil(len(tasks) / columns))
-    # Each panel's legend in a row of its own below it, tall enough for the row's longest legend (the
-    # curves stay uncovered): entries are the groups and up to two logged runs.
-    entries = [len(members) + 2 for members in tasks.values()]
-    legend_rows = [max(entries[r * columns : (r + 1) * columns]) * 0.13 + 0.1 for r in range(rows)]
-    heights = [h for legend in legend_rows for h in (3.6, legend)]
-    fig, grid = new_figure(2 * rows, columns, figsize=(7.0 * columns, sum(heights) + 0.8),
-                           gridspec_kw={"height_ratios": heights})  # fmt: skip
-    axes, legends = grid[0::2], grid[1::2]
-    for ax, legend, (task, members) in zip(axes.ravel(), legends.ravel(), tasks.items(), strict=False):
+    # Legend entries: the groups and up to two logged runs.
+    fig, axes, legends = panels_with_legends([len(members) + 2 for members in tasks.values()])
+    for ax, legend, (task, members) in zip(axes, legends, tasks.items(), strict=True):
         longest = max(len(r.returns) for _, _, records in members for r in records)
         for index, (algo, variant, records) in enumerate(members):
             epochs, curves = seed_curves(records)
-            reached = [r.reached_095 for r in records]
-            first = f"first 0.95 at {np.mean(reached):.1f}" if None not in reached else \
-                f"{sum(e is not None for e in reached)}/{len(reached)} seeds reach 0.95"  # fmt: skip
+            first = first_095_text(records)
             colour, style = f"C{index % 10}", "-" if records[0].track == "tactile" else "--"
             ax.fill_between(epochs, curves.min(0), curves.max(0), color=colour, alpha=0.1)
             ax.plot(epochs, curves.mean(0), color=colour, ls=style, lw=1.8,
                     label=f"{_label(algo, variant)}, {records[0].track}: {first}")  # fmt: skip
-        logged = sorted({algo for algo, _, _ in members})
+        logged = sorted({algo for algo, _, _ in members if ("sim", task, algo) in originals})
         for (shade, dashes), algo in zip((("black", ":"), ("dimgrey", "-.")), logged, strict=False):
             original = originals.get(("sim", task, algo))
             if original is not None:
@@ -736,15 +789,12 @@ def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str 
         ax.set_xlabel("epoch (250 steps)")
         ax.set_ylabel(f"test return, mean of {compared_seeds(task)}+ seeds")
         ax.set_ylim(-0.05, 1.05)
-        legend.axis("off")
         legend.legend(*ax.get_legend_handles_labels(), fontsize=6.5, loc="upper left", frameon=False)
-    for ax in (*axes.ravel()[len(tasks) :], *legends.ravel()[len(tasks) :]):
-        ax.axis("off")
     fig.tight_layout()
     return save_figure(fig, path)
 
 
-def _by_task_section(groups: dict, figures: Path, link: str, written: set[str]) -> list[str]:
+def by_task_section(groups: dict, figures: Path, link: str, written: set[str]) -> list[str]:
     """The report's lines on :func:`plot_by_task`'s figure (none where it draws nothing)."""
     if plot_by_task(groups, figures / "by_task.png") is None:
         return []
@@ -755,6 +805,42 @@ def _by_task_section(groups: dict, figures: Path, link: str, written: set[str]) 
         "shaded; dashed: the `proprio` track), over the original release's logged runs:", "",
         f"![curves by task]({link}by_task.png)", "",
     ]  # fmt: skip
+
+
+def linked_figures(page: Path, link: str) -> set[str]:
+    """The PNGs in ``link`` (a folder's link, ``results/``, or ``""``) that ``page`` links, if it exists."""
+    if not page.exists():
+        return set()
+    return set(re.findall(r"\]\(" + re.escape(link) + r"([^)/]+\.png)\)", page.read_text()))
+
+
+def group_sections(groups: dict, figures: Path, link: str, written: set[str]) -> list[str]:
+    """A section per group: its runs (:func:`_run_line`), the typing confusion over its seeds and, for a
+    run with policy snapshots, the paper's Figure 4; the figures go in ``figures`` and join ``written``."""
+    from tactile_braille.evaluation.runs import save_typing_confusion
+
+    lines = []
+    for (task, algo, variant), records in groups.items():
+        name = f"{task.split('-')[0]}__{algo}" + (
+            f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""
+        )
+        lines += [f"## {task}, {_label(algo, variant)}", ""]
+        lines += [_run_line(r) for r in records]
+        typed = [r for r in records if r.typing]
+        if typed:
+            confusion = np.sum([r.typing["confusion"]["counts"] for r in typed], axis=0)
+            first = typed[0].typing["confusion"]
+            caption = f"{task}, {_label(algo, variant)}: typing over {len(typed)} seeds"
+            path = figures / f"confusion_{name}.png"
+            save_typing_confusion(confusion, first["rows"], first["columns"], path, caption)
+            written.add(path.name)
+            lines += ["", f"![typing confusion]({link}confusion_{name}.png)"]
+        with_snapshots = [r for r in records if (r.path / "snapshots").is_dir()]
+        if with_snapshots and plot_trajectories(with_snapshots[0], figures / f"trajectories_{name}.png"):
+            written.add(f"trajectories_{name}.png")
+            lines += ["", f"![trajectories]({link}trajectories_{name}.png)"]
+        lines.append("")
+    return lines
 
 
 def write_report(
@@ -782,8 +868,6 @@ def write_report(
         warm_dirs: warm-started runs (``init.json``) and their sources, tabled in a section of their
             own beside ``run_dirs``' runs of the same settings from scratch.
     """
-    from tactile_braille.evaluation.runs import save_typing_confusion
-
     output = Path(output)
     if output.suffix == ".md":
         report, figures, link = output, output.with_suffix(""), output.with_suffix("").name + "/"
@@ -792,9 +876,7 @@ def write_report(
     groups = group(load_records(run_dirs))
     if not groups:
         raise ValueError("no runs to report")
-    previous: set[str] = set()  # the figures the previous report here linked
-    if report.exists():
-        previous = set(re.findall(r"\]\(" + re.escape(link) + r"([^)/]+\.png)\)", report.read_text()))
+    previous = linked_figures(report, link)
     figures.mkdir(parents=True, exist_ok=True)
     written = {plot_curves(groups, figures / "curves.png").name}
     lines = [
@@ -807,31 +889,12 @@ def write_report(
         "'reset per key', as the released code ran it (a random start before every key; "
         "docs/evaluation.md); convergence is the paper's rule (first epoch reaching 95 % of "
         "the run's best test return) and, stricter, the first epoch whose test return reaches 0.95.",
-        "", results_table(groups), "", *_coverage_section(groups), *([notes.strip(), ""] if notes else []),
+        "", results_table(groups), "", *coverage_section(groups), *([notes.strip(), ""] if notes else []),
         f"![training curves]({link}curves.png)", "",
     ]  # fmt: skip
-    lines += _by_task_section(groups, figures, link, written)
-    lines += _transfer_section(transfer_dirs) + _warm_start_section(warm_dirs, groups, figures, link, written)
-    for (task, algo, variant), records in groups.items():
-        name = f"{task.split('-')[0]}__{algo}" + (
-            f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""
-        )
-        lines += [f"## {task}, {_label(algo, variant)}", ""]
-        lines += [_run_line(r) for r in records]
-        typed = [r for r in records if r.typing]
-        if typed:
-            confusion = np.sum([r.typing["confusion"]["counts"] for r in typed], axis=0)
-            first = typed[0].typing["confusion"]
-            caption = f"{task}, {_label(algo, variant)}: typing over {len(typed)} seeds"
-            path = figures / f"confusion_{name}.png"
-            save_typing_confusion(confusion, first["rows"], first["columns"], path, caption)
-            written.add(path.name)
-            lines += ["", f"![typing confusion]({link}confusion_{name}.png)"]
-        with_snapshots = [r for r in records if (r.path / "snapshots").is_dir()]
-        if with_snapshots and plot_trajectories(with_snapshots[0], figures / f"trajectories_{name}.png"):
-            written.add(f"trajectories_{name}.png")
-            lines += ["", f"![trajectories]({link}trajectories_{name}.png)"]
-        lines.append("")
+    lines += by_task_section(groups, figures, link, written)
+    lines += transfer_section(transfer_dirs) + warm_start_section(warm_dirs, groups, figures, link, written)
+    lines += group_sections(groups, figures, link, written)
     with atomic_path(report) as temporary:
         temporary.write_text("\n".join(lines))
     for stale in previous - written:
