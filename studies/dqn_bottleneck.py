@@ -25,7 +25,7 @@ A run whose test return lags its perception is limited by control (how the
 values spread over the grid); one whose wrong presses and perception errors
 go together, by perception.
 
-    python benchmarks/dqn_bottleneck.py RUN [CHECKPOINT ...] [--episodes 100] [--dataset keys-train]
+    python studies/dqn_bottleneck.py RUN [CHECKPOINT ...] [--episodes 100] [--dataset keys-train]
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Scripts of benchmarks/ that read training runs, run on tiny runs made here."""
+"""Scripts of studies/ (and benchmarks/) that read training runs, run on tiny runs made here."""
 
 from __future__ import annotations
 
@@ -12,12 +12,13 @@ import pytest
 from tactile_braille.agents import DiscreteSACConfig, DQNConfig, SACConfig, TrainConfig, train
 from tactile_braille.agents.config import replace_settings
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+ROOT = Path(__file__).resolve().parents[1]
 ARROWS = "tactile_braille/DiscreteArrows-v0"
 
 
 def _load(name: str):
-    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
+    (path,) = [p for p in (ROOT / "studies" / f"{name}.py", ROOT / "benchmarks" / f"{name}.py") if p.exists()]
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

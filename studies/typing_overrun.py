@@ -11,7 +11,7 @@ prints how far past the workspace each key's attempt started (median and largest
 and steps a key of the keys started inside and of those started :data:`OUT_MM` or more outside;
 ``--by-key`` adds a row per goal key (which keys a run misses, and whether from outside).
 
-    python benchmarks/typing_overrun.py RUN_DIR [RUN_DIR ...] [--by-key]
+    python studies/typing_overrun.py RUN_DIR [RUN_DIR ...] [--by-key]
 """
 
 from __future__ import annotations

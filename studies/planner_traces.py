@@ -14,8 +14,8 @@ under each labelled frame (found from the stored sample the frame is). All three
 measurement may know (the grid's keys, the pose), never given to the agent: a diagnostic, not a
 result.
 
-    python benchmarks/planner_traces.py RUN_DIR [RUN_DIR ...] [--reader] [--show 5] [--set free_repeats=1]
-    python benchmarks/planner_traces.py RUN_DIR --refit --labels --set backtrack_prior=False
+    python studies/planner_traces.py RUN_DIR [RUN_DIR ...] [--reader] [--show 5] [--set free_repeats=1]
+    python studies/planner_traces.py RUN_DIR --refit --labels --set backtrack_prior=False
 
 ``--set NAME=VALUE`` types with a planner setting changed from the run's (one that acts at test time,
 such as ``gamma``, ``free_repeats`` or ``repeat_penalty``; the learnt reader and graph are the

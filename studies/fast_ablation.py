@@ -6,10 +6,10 @@ paper's rule and the first epoch at 0.95, with the wall clock per run. The
 report command turns the same runs into the table and curves of
 docs/results.md.
 
-    python benchmarks/fast_ablation.py --task DiscreteAlphabet-v0 --algo dqn --seeds 0
-    python benchmarks/fast_ablation.py --variants fast no-refits --seeds 0 1 2
-    python benchmarks/fast_ablation.py --task ContinuousAlphabet-v0 --algo sac --variants latent
-    python benchmarks/fast_ablation.py --task DiscreteArrows-v0 --variants tactile-no-goal-offsets \
+    python studies/fast_ablation.py --task DiscreteAlphabet-v0 --algo dqn --seeds 0
+    python studies/fast_ablation.py --variants fast no-refits --seeds 0 1 2
+    python studies/fast_ablation.py --task ContinuousAlphabet-v0 --algo sac --variants latent
+    python studies/fast_ablation.py --task DiscreteArrows-v0 --variants tactile-no-goal-offsets \
         tactile-features tactile-paper-relabel paper+all --seeds 0 1 2 --archive results/ablation-tactile
 
 ``--archive DIR`` copies each run's record (with its typing evaluation) to DIR, where ``make results``

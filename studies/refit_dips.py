@@ -6,7 +6,7 @@ start steps). A learner on the encoder's latent features loses ground at a
 refit, whose new weights give the features new meanings; a learner on its
 readout (``touch_inputs="readout"``) does not.
 
-    python benchmarks/refit_dips.py runs/fast/ContinuousAlphabet__sac__* runs/ablation/ContinuousAlphabet__*
+    python studies/refit_dips.py runs/fast/ContinuousAlphabet__sac__* runs/ablation/ContinuousAlphabet__*
 """
 
 from __future__ import annotations

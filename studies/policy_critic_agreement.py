@@ -13,7 +13,7 @@ A converged run agrees at nearly every step. A policy far more confident than it
 has committed to actions its critics no longer prefer: with a temperature near zero the
 softmax's gradient towards an improbable action is scaled by its probability.
 
-    python benchmarks/policy_critic_agreement.py runs/table3/paper/DiscreteAlphabet-v0__sac_discrete__0
+    python studies/policy_critic_agreement.py runs/table3/paper/DiscreteAlphabet-v0__sac_discrete__0
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ script types the paper's sequences (the paper's protocol: no reset between keys,
 the overrunning edge alone, and in the released simulator's world (both rules), and prints side by
 side: accuracy, steps, and the share of steps whose move the edge cut short or overran.
 
-    python benchmarks/typing_edges.py RUN_DIR [RUN_DIR ...]
+    python studies/typing_edges.py RUN_DIR [RUN_DIR ...]
 """
 
 from __future__ import annotations
