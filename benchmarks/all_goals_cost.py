@@ -21,6 +21,7 @@ import torch
 
 import tactile_braille  # noqa: F401 - registers the environments
 from tactile_braille.agents import preset_config
+from tactile_braille.agents.replay import GoalOutcomes
 from tactile_braille.agents.training import make_agent, make_env
 from train_throughput import random_replay  # this folder's
 
@@ -68,7 +69,7 @@ def main() -> None:
     for algo, task in CASES:
         config = preset_config("paper", task, algo, precision="bf16")
         env = make_env(config)
-        buffer, rng = random_replay(env, all_goals=True), np.random.default_rng(0)  # serves both
+        buffer, rng = random_replay(env, extras=(GoalOutcomes(),)), np.random.default_rng(0)  # serves both
         batches = [buffer.sample(config.agent.batch_size, rng) for _ in range(args.updates)]
         variants = {every: dataclasses.replace(config.agent, all_goals=every) for every in (False, True)}
         agents = {

@@ -53,7 +53,7 @@ def ours_update_ms(algo: str, precision: str, updates: int) -> float:
 
 
 def random_replay(env: gym.Env, steps: int = 400, **options) -> EpisodeReplayBuffer:
-    """A replay of ``steps`` random environment steps (``options``: the buffer's, e.g. ``all_goals``)."""
+    """A replay of ``steps`` random environment steps (``options``: the buffer's, e.g. ``extras``)."""
     action_shape = env.action_space.shape if isinstance(env.action_space, gym.spaces.Box) else ()
     buffer = EpisodeReplayBuffer(2_000, config_goal(env), action_shape, config_previous(env), **options)
     observation, _ = env.reset(seed=0)
