@@ -66,3 +66,23 @@ def test_every_command_line_names_a_command_that_exists(line):
         build_parser().parse_args(words[1:])
     else:
         assert words[:1] == ["python"] and (ROOT / words[1]).exists(), line
+
+
+def test_the_headline_table_is_what_the_committed_records_give():
+    """The README's results table is generated (``make results``): the records committed under results/,
+    ranked as the Makefile ranks them, give exactly the table the README holds."""
+    from tactile_braille.evaluation.leaderboard import HEADLINE_MARKERS, headline_markdown, load_results
+
+    apart = ("tuning", "diagnostics", "transfer", "warm-start")
+    records = sorted({path.parent for path in [*ROOT.glob("results/*/*/config.json"),
+                                               *ROOT.glob("results/*/*/*/config.json")]})  # fmt: skip
+    ranked = [
+        record
+        for record in records
+        if record.relative_to(ROOT / "results").parts[0] not in apart
+        and not record.relative_to(ROOT / "results").parts[0].startswith("ablation-")
+    ]
+    files = sorted(ROOT.glob("results/leaderboard/*/*.json"))
+    start, end = HEADLINE_MARKERS
+    held = README.split(start)[1].split(end)[0]
+    assert held.strip() == headline_markdown(load_results([*ranked, *files])).strip()
