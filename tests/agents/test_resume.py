@@ -2,11 +2,14 @@
 
 Each case here failed before the fix it tests: two resumes ran side by side, ``--epochs``
 was ignored on a resume, a missing checkpoint restarted the run at epoch 0, and a damaged checkpoint
-or replay file ended in a traceback.
+or replay file ended in a traceback; a progress.csv truncated, torn or edited was reported and
+resumed as if whole (epochs dropped from the log).
 """
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 import signal
@@ -173,3 +176,121 @@ def test_a_dataset_that_is_neither_a_file_nor_a_default_name_is_refused_before_t
     command = ["train", "ContinuousAlphabet-v0", "sac", "--dataset", "grid-alphabet-6mn", "--quiet"]
     assert main([*command, "--run-dir", str(run)]) != 0
     assert "nor a default dataset's name (" in one_line_error(capsys) and not run.exists()
+
+
+# ------------------------------------------------------------------ a damaged progress.csv
+@pytest.fixture
+def three_epoch_run(env_datasets, tmp_path) -> Path:
+    """A finished three-epoch DQN run, checkpointed after its last epoch."""
+    config = TrainConfig(
+        epochs=3, steps_per_epoch=30, start_steps=10, threads=1, dataset=str(env_datasets[ARROWS]),
+        agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 1, "snapshots": 1},
+        replay={"capacity": 2000},
+    )  # fmt: skip
+    return train(config, run_dir=tmp_path / "run", progress=False)
+
+
+def files_of(run: Path) -> dict[str, bytes]:
+    """Every file under the run folder (its lock, TensorBoard events and snapshots included)."""
+    return {
+        str(path.relative_to(run)): path.read_bytes() for path in sorted(run.rglob("*")) if path.is_file()
+    }
+
+
+def _lines(run: Path) -> list[str]:
+    return (run / "progress.csv").read_bytes().decode().splitlines(keepends=True)
+
+
+def _keep_two_rows(run: Path) -> None:
+    (run / "progress.csv").write_text("".join(_lines(run)[:3]), newline="")
+
+
+def _tear_last_row(run: Path) -> None:
+    text = (run / "progress.csv").read_bytes().decode()
+    (run / "progress.csv").write_text(text[: len(text) - len(_lines(run)[-1]) // 2], newline="")
+
+
+def _drop_middle_row(run: Path) -> None:
+    lines = _lines(run)
+    (run / "progress.csv").write_text("".join(lines[:2] + lines[3:]), newline="")
+
+
+def _edit_a_return(run: Path) -> None:
+    rows = list(csv.reader(io.StringIO((run / "progress.csv").read_bytes().decode(), newline="")))
+    column = rows[0].index("test/episodic_return")
+    rows[2][column] = "2.0" if rows[2][column] != "2.0" else "3.0"  # no return reaches 2: plainly forged
+    with open(run / "progress.csv", "w", newline="") as handle:
+        csv.writer(handle).writerows(rows)
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        (_keep_two_rows, "has 2 rows, but checkpoint.pt holds epoch 2 (3 rows): rows were lost"),
+        (_tear_last_row, "its last row is torn (an incomplete CSV line"),
+        (_drop_middle_row, "line 3 logs epoch 2, not 1: rows were lost or repeated"),
+        (_edit_a_return, "its first 3 rows differ from those checkpoint.pt recorded"),
+    ],
+    ids=["truncated to two rows", "torn last row", "a middle row lost", "a return edited"],
+)
+def test_a_damaged_progress_log_is_refused_by_report_and_resume_changing_nothing(
+    three_epoch_run, capsys, damage, message
+):
+    run = three_epoch_run
+    damage(run)
+    before = files_of(run)
+    assert main(["report", str(run), "--episodes", "1"]) == 2
+    error = one_line_error(capsys)
+    assert message in error and "restore progress.csv from a backup or start the run again" in error, error
+    assert main(resume(run, "--epochs", "4")) == 2
+    assert message in one_line_error(capsys)
+    assert main(resume(run)) == 2
+    assert message in one_line_error(capsys)
+    assert files_of(run) == before  # no report, no new settings, no lock taken, no row dropped
+    with pytest.raises(ValueError, match=r"restore progress\.csv from a backup"):
+        read_progress(run)  # what every report over runs reads
+
+
+def test_a_torn_row_after_the_checkpoint_can_be_dropped_and_the_run_resumed(finished_run, capsys):
+    """A run killed after logging epoch 2 and before checkpointing it, whose last row was then torn (a
+    copy cut short): that row is not needed (a resume runs epoch 2 again), and the message says so."""
+    run = finished_run
+    assert main(resume(run, "--epochs", "2")) == 0
+    kept = {name: data for name, data in files_of(run).items() if name.endswith((".pt", ".npz"))}
+    assert main(resume(run, "--epochs", "3")) == 0
+    for path in [*run.glob("replay.*.npz"), run / CHECKPOINT_FILE]:
+        path.unlink()
+    for name, data in kept.items():  # the checkpoint after epoch 1, and its replay
+        (run / name).write_bytes(data)
+    _tear_last_row(run)
+    before = files_of(run)
+    assert main(["report", str(run), "--episodes", "1"]) == 2
+    assert "its last row is torn" in one_line_error(capsys)
+    assert main(resume(run)) == 2
+    error = one_line_error(capsys)
+    assert "its last row is torn" in error and "delete its rows from epoch 2 on and resume" in error, error
+    assert files_of(run) == before
+    (run / "progress.csv").write_bytes("".join(_lines(run)[:3]).encode())  # as the message says
+    assert main(resume(run)) == 0
+    assert [int(row["epoch"]) for row in read_progress(run)] == [0, 1, 2]
+
+
+def test_a_checkpoint_from_before_log_digests_still_resumes_and_reports(three_epoch_run, capsys):
+    import torch
+
+    state = torch.load(three_epoch_run / CHECKPOINT_FILE, weights_only=False)
+    for key in [key for key in state if key.startswith("progress")]:
+        del state[key]
+    torch.save(state, three_epoch_run / CHECKPOINT_FILE)
+    assert main(["report", str(three_epoch_run), "--episodes", "1"]) == 0
+    assert main(resume(three_epoch_run, "--epochs", "4")) == 0
+    assert [int(row["epoch"]) for row in read_progress(three_epoch_run)] == [0, 1, 2, 3]
+
+
+def test_a_resume_whose_log_is_gone_but_whose_checkpoint_covers_epochs_is_refused(three_epoch_run, capsys):
+    (three_epoch_run / "progress.csv").unlink()
+    before = files_of(three_epoch_run)
+    assert main(resume(three_epoch_run, "--epochs", "4")) == 2
+    error = one_line_error(capsys)
+    assert "has no progress.csv, but its checkpoint.pt holds epoch 2" in error and "from a backup" in error
+    assert files_of(three_epoch_run) == before

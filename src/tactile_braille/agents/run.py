@@ -8,13 +8,17 @@ events (``charts/...``, ``losses/...``, when TensorBoard is installed),
 ``snapshots/epoch_NNNN.pt`` (policy snapshots) and, every
 ``checkpoint_every`` epochs, an atomic checkpoint (``checkpoint.pt``:
 networks, optimisers, counters and generator states; ``replay.{epoch}.npz``:
-the replay buffer it names). Every file is written atomically, so a crash or
+the replay buffer it names; the checkpoint records how many rows of
+``progress.csv`` it covers and their digest, so a log that lost rows, was torn or
+was edited is refused). Every file is written atomically, so a crash or
 ``kill -9`` costs at most the work since the last checkpoint.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
+import io
 import json
 import time
 from dataclasses import dataclass
@@ -209,11 +213,13 @@ def save_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator, coun
     """
     replay = f"replay.{counters.epoch}.npz"
     buffer.save(run_dir / replay)
+    with open(run_dir / PROGRESS_FILE, newline="") as handle:  # the row of this epoch is logged already
+        rows = [row for row in csv.DictReader(handle) if int(row["epoch"]) <= counters.epoch]
     state = {
         "agent": agent.state_dict(), "rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
         "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
         "epoch": counters.epoch, "env_steps": counters.env_steps, "updates": counters.updates,
-        "replay": replay,
+        "replay": replay, "progress_rows": len(rows), "progress_sha256": progress_digest(rows),
     }  # fmt: skip
     with atomic_path(run_dir / CHECKPOINT_FILE, fsync=True) as temporary:
         torch.save(state, temporary)
@@ -229,15 +235,12 @@ def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -
     path = run_dir / CHECKPOINT_FILE
     if not path.exists():
         return Counters()
+    state = _read_checkpoint(path, agent.device)
     try:
-        state = torch.load(path, weights_only=False, map_location=agent.device)
         counters = Counters(int(state["epoch"]) + 1, int(state["env_steps"]), int(state["updates"]))
         agent.load_state_dict(state["agent"])
-    except Exception as error:  # torch raises many kinds on a truncated or foreign file
-        raise ValueError(
-            f"{path} is unreadable ({type(error).__name__}: {str(error)[:120]}); it is truncated, damaged or "
-            "not a checkpoint of this run: restore it from a copy, or start a new run"
-        ) from None
+    except Exception as error:  # a checkpoint of another agent, or one missing its entries
+        raise _unreadable(path, error) from None
     rng.bit_generator.state = state["rng"]
     torch.set_rng_state(state["torch_rng"].cpu())
     if state.get("cuda_rng") is not None and torch.cuda.is_available():
@@ -250,6 +253,23 @@ def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -
             f"({type(error).__name__}: {str(error)[:120]}): restore it from a copy, or start a new run"
         ) from None
     return counters
+
+
+def _read_checkpoint(path: Path, device, mmap: bool = False) -> dict:
+    """A checkpoint's contents, or a ValueError naming it where it is unreadable."""
+    try:
+        state = torch.load(path, weights_only=False, map_location=device, mmap=mmap)
+        int(state["epoch"])
+        return state
+    except Exception as error:  # torch raises many kinds on a truncated or foreign file
+        raise _unreadable(path, error) from None
+
+
+def _unreadable(path: Path, error: Exception) -> ValueError:
+    return ValueError(
+        f"{path} is unreadable ({type(error).__name__}: {str(error)[:120]}); it is truncated, damaged or "
+        "not a checkpoint of this run: restore it from a copy, or start a new run"
+    )
 
 
 # ------------------------------------------------------------------ warm starts
@@ -390,12 +410,101 @@ def _tensorboard(run_dir: Path, resumed_at: int | None):
 
 
 def read_progress(run_dir: str | Path) -> list[dict[str, float]]:
-    """The run's per-epoch log as a list of rows (numbers as floats, blanks as NaN)."""
-    with open(Path(run_dir) / PROGRESS_FILE, newline="") as handle:
-        return [
-            {key: float(value) if value not in ("", None) else float("nan") for key, value in row.items()}
-            for row in csv.DictReader(handle)
-        ]
+    """The run's per-epoch log as a list of rows (numbers as floats, blanks as NaN).
+
+    A log that cannot be the run's whole history is refused (a ValueError that says what is wrong and
+    how to recover): a torn last row (an incomplete line), a row with the wrong number of fields, epochs
+    not 0, 1, 2, ... in order (rows lost or repeated), or, where the run has a checkpoint, fewer rows
+    than it covers or rows that differ from the digest it recorded of them (checkpoints from before
+    digests record only their epoch). Rows after the checkpoint (epochs a resume runs again) are normal.
+    A record without a checkpoint (an archived run under ``results/``) gets the first checks.
+    """
+    return [
+        {key: float(value) if value != "" else float("nan") for key, value in row.items()}
+        for row in _checked_rows(Path(run_dir))
+    ]
+
+
+def check_progress(run_dir: str | Path) -> None:
+    """Refuse a run whose log is damaged (:func:`read_progress`'s checks), or missing though its
+    checkpoint covers logged epochs: before a resume changes anything."""
+    run_dir = Path(run_dir)
+    if (run_dir / PROGRESS_FILE).exists():
+        _checked_rows(run_dir)
+        return
+    covered, _ = _checkpoint_covers(run_dir)
+    if covered:
+        raise ValueError(
+            f"{run_dir} has no {PROGRESS_FILE}, but its {CHECKPOINT_FILE} holds epoch {covered - 1}: its "
+            f"epochs' rows cannot be recreated: restore {PROGRESS_FILE} from a backup or start the run again"
+        )
+
+
+def progress_digest(rows: list[dict[str, str]]) -> str:
+    """SHA-256 of logged rows as written (every column, the timing ones included). A column first
+    logged in a later epoch is blank in the earlier rows: blanks are left out, so a row's digest never
+    changes once it is written."""
+    text = json.dumps([{k: v for k, v in row.items() if v != ""} for row in rows], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _checkpoint_covers(run_dir: Path) -> tuple[int, str | None]:
+    """How many rows of the log the run's checkpoint covers (0 without one), and their digest (None
+    for a checkpoint from before digests)."""
+    path = run_dir / CHECKPOINT_FILE
+    if not path.exists():
+        return 0, None
+    state = _read_checkpoint(path, "cpu", mmap=True)  # mapped, not read: the networks are not needed
+    return int(state.get("progress_rows", int(state["epoch"]) + 1)), state.get("progress_sha256")
+
+
+def _checked_rows(run_dir: Path) -> list[dict[str, str]]:
+    """The log's rows as written (strings), after :func:`read_progress`'s checks."""
+    path = run_dir / PROGRESS_FILE
+    text = path.read_bytes().decode("utf-8", errors="replace")
+    rows = list(csv.DictReader(io.StringIO(text, newline="")))
+    covered, digest = _checkpoint_covers(run_dir)
+
+    def refuse(problem: str, first_bad: int) -> ValueError:
+        if covered and first_bad >= covered:  # only rows after the checkpoint: a resume runs them again
+            recovery = (
+                f"delete its rows from epoch {covered} on and resume (--resume runs them again); or "
+                f"restore {PROGRESS_FILE} from a backup"
+            )
+        else:
+            recovery = "those rows cannot be recreated: "
+            recovery += f"restore {PROGRESS_FILE} from a backup or start the run again"
+        return ValueError(f"{path} {problem}; {recovery}")
+
+    if text and not text.endswith("\n"):
+        raise refuse(
+            "is damaged: its last row is torn (an incomplete CSV line: cut while copied?)", len(rows) - 1
+        )
+    for index, row in enumerate(rows):
+        if None in row or None in row.values():
+            raise refuse(f"is damaged: line {index + 2} has another number of fields than the header", index)
+        try:
+            epoch = float(row["epoch"])
+            for value in row.values():
+                if value != "":
+                    float(value)
+        except (KeyError, ValueError):
+            raise refuse(f"is damaged: line {index + 2} holds a value that is not a number", index) from None
+        if epoch != index:
+            lost = f"is damaged: line {index + 2} logs epoch {row['epoch']}, not {index}"
+            lost += ": rows were lost or repeated"
+            raise refuse(lost, index)
+    if len(rows) < covered:
+        raise refuse(
+            f"has {len(rows)} rows, but {CHECKPOINT_FILE} holds epoch {covered - 1} ({covered} rows): rows "
+            "were lost (truncated?)",
+            len(rows),
+        )
+    if digest is not None and progress_digest(rows[:covered]) != digest:
+        raise refuse(
+            f"is damaged: its first {covered} rows differ from those {CHECKPOINT_FILE} recorded (edited?)", 0
+        )
+    return rows
 
 
 def append_progress(path: Path, row: dict) -> None:

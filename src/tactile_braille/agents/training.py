@@ -32,6 +32,7 @@ from tactile_braille.agents.run import (
     Counters,
     EpochLog,
     check_init_from,
+    check_progress,
     open_run,
     read_config,
     record_world,
@@ -66,6 +67,7 @@ def train(
     run_dir = run_folder(config, run_dir, resume)
     if resume:
         read_config(run_dir)  # a folder that holds no run is refused before its lock is made
+        check_progress(run_dir)  # and one whose log lost, tore or changed rows its checkpoint covers
     else:  # a new run's folder is made only for settings that can run
         (config or TrainConfig()).check_rig(rig)
         check_init_from(config or TrainConfig(), run_dir)
