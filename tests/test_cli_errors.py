@@ -15,6 +15,9 @@ import torch
 from tactile_braille.cli import main
 
 RECORD = str(Path(__file__).parents[1] / "results" / "tuning" / "DA_relabel-all_utd4_100")  # committed
+RESULTS = Path(__file__).parents[1] / "results" / "leaderboard"  # committed
+RESULT = str(RESULTS / "cleanrl" / "DiscreteArrows-v0__dqn_her__0.json")
+ELSEWHERE = str(RESULTS / "sb3" / ".." / "cleanrl" / "DiscreteArrows-v0__dqn_her__0.json")  # the same file
 
 CASES = {
     "train --seed -1": (["train", "DiscreteArrows-v0", "--seed", "-1", "--run-dir", "{tmp}/run"],
@@ -48,6 +51,9 @@ CASES = {
     "keycaps --resolution-mm 0.0001": (["keycaps", "--resolution-mm", "0.0001", "--out", "{tmp}/caps"],
                                        "finer than 0.01 mm"),
     "import a folder as its csv": (["import", "{tmp}", "--output", "{tmp}/i.h5"], "is not a file"),
+    "leaderboard a results file twice": (["leaderboard", RESULT, RESULT], "are the same results file, given"),
+    "leaderboard a file twice, spelt two ways": (["leaderboard", RESULT, ELSEWHERE],
+                                                  "are the same results file, given"),
 }  # fmt: skip
 if not torch.cuda.is_available():
     CASES["train --device cuda without CUDA"] = (

@@ -12,6 +12,7 @@ import csv
 import io
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -179,15 +180,21 @@ def test_a_dataset_that_is_neither_a_file_nor_a_default_name_is_refused_before_t
 
 
 # ------------------------------------------------------------------ a damaged progress.csv
-@pytest.fixture
-def three_epoch_run(env_datasets, tmp_path) -> Path:
-    """A finished three-epoch DQN run, checkpointed after its last epoch."""
+@pytest.fixture(scope="module")
+def _three_epoch_original(env_datasets, tmp_path_factory) -> Path:
     config = TrainConfig(
         epochs=3, steps_per_epoch=30, start_steps=10, threads=1, dataset=str(env_datasets[ARROWS]),
         agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 1, "snapshots": 1},
         replay={"capacity": 2000},
     )  # fmt: skip
-    return train(config, run_dir=tmp_path / "run", progress=False)
+    return train(config, run_dir=tmp_path_factory.mktemp("three_epochs") / "run", progress=False)
+
+
+@pytest.fixture
+def three_epoch_run(_three_epoch_original, tmp_path) -> Path:
+    """A finished three-epoch DQN run, checkpointed after its last epoch (a copy of one trained once per
+    module: each test may damage its own)."""
+    return Path(shutil.copytree(_three_epoch_original, tmp_path / "run"))
 
 
 def files_of(run: Path) -> dict[str, bytes]:

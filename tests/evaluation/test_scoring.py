@@ -123,6 +123,60 @@ def test_bad_settings_are_refused(arrows):
         evaluate_policy(press, "ContinuousArrows-v0", env=arrows)
 
 
+def never_press(observation):
+    return DISCRETE_ACTIONS.index("UP")
+
+
+class Counted:
+    """A policy that fails the test once called more often than ``most`` times (a loop without end)."""
+
+    def __init__(self, policy, most: int) -> None:
+        self.policy, self.most, self.calls = policy, most, 0
+
+    def __call__(self, observation):
+        self.calls += 1
+        assert self.calls <= self.most, f"called {self.calls} times: the protocol's limit was not imposed"
+        return self.policy(observation)
+
+
+@pytest.mark.parametrize(("limit", "steps"), [(None, 25), (10, 10)], ids=["registered", "given"])
+def test_the_protocols_episode_limit_holds_in_an_environment_without_one(arrows, limit, steps):
+    """An unwrapped environment has no time limit: a policy that never presses still ends each key at
+    the protocol's limit (the registered 25 steps, or the one given), as the fingerprint records."""
+    policy = Counted(never_press, 96 * steps)
+    report = evaluate_policy(policy, ARROWS, env=arrows.unwrapped, max_episode_steps=limit, sentences=False)
+    assert report.total_steps == 96 * steps and report.accuracy == 0.0
+    assert report.conditions["max_episode_steps"] == steps
+    assert [row[-1] for row in report.confusion["counts"]] == [24] * 4  # every key timed out (NONE)
+
+
+def test_a_longer_time_limit_is_cut_to_the_protocols_and_a_shorter_one_refused(arrows):
+    longer = gym.wrappers.TimeLimit(arrows.unwrapped, 1000)
+    report = evaluate_policy(Counted(never_press, 96 * 25), ARROWS, env=longer)
+    assert report.total_steps == 96 * 25
+    assert report.fingerprint == evaluate_policy(never_press, ARROWS, env=arrows).fingerprint
+    shorter = gym.wrappers.TimeLimit(arrows.unwrapped, 10)
+    with pytest.raises(ValueError, match=r"time limit \(10 steps\) cuts keys short of the protocol's 25"):
+        evaluate_policy(never_press, ARROWS, env=shorter)
+    with pytest.raises(ValueError, match="max_episode_steps must be a positive integer or None, got 0"):
+        evaluate_policy(never_press, ARROWS, env=arrows, max_episode_steps=0)
+
+
+def test_arguments_of_the_wrong_kind_are_refused_before_anything_is_made(arrows, env_datasets, tmp_path):
+    missing = tmp_path / "no-such-dataset.h5"  # made first, the environment would fail on it instead
+    with pytest.raises(TypeError, match="a policy must be callable"):
+        evaluate_policy(3, ARROWS, dataset=missing)
+    with pytest.raises(TypeError, match=r"task must be a task's name \(e.g. 'DiscreteArrows-v0'\), got int"):
+        evaluate_policy(press, 3, dataset=missing)
+    with pytest.raises(TypeError, match="pass the environment as env="):
+        evaluate_policy(press, arrows)
+    with pytest.raises(TypeError, match=r"env must be a gymnasium\.Env of the task"):
+        evaluate_policy(press, ARROWS, env="DiscreteArrows-v0")
+    vector = gym.vector.SyncVectorEnv([lambda: gym.make(ARROWS, dataset=env_datasets[ARROWS])] * 2)
+    with pytest.raises(TypeError, match="env is a vector environment of 2; typing is scored in one"):
+        evaluate_policy(press, ARROWS, env=vector)
+
+
 def test_the_fingerprint_changes_with_what_decides_the_score(arrows, monkeypatch):
     base = evaluate_policy(press, ARROWS, env=arrows)
     assert evaluate_policy(press, ARROWS, env=arrows).fingerprint == base.fingerprint
@@ -130,7 +184,7 @@ def test_the_fingerprint_changes_with_what_decides_the_score(arrows, monkeypatch
     assert evaluate_policy(press, ARROWS, env=arrows, seed=1).fingerprint != base.fingerprint
     assert evaluate_policy(press, ARROWS, env=arrows, protocol="released").fingerprint != base.fingerprint
     shorter = gym.make(ARROWS, dataset=arrows.unwrapped.world["dataset"], max_episode_steps=10)
-    assert evaluate_policy(press, ARROWS, env=shorter).fingerprint != base.fingerprint
+    assert evaluate_policy(press, ARROWS, env=shorter, max_episode_steps=10).fingerprint != base.fingerprint
     # ... the project's version ...
     monkeypatch.setattr(scoring, "__version__", "9.9.9")
     assert evaluate_policy(press, ARROWS, env=arrows).fingerprint != base.fingerprint
@@ -215,7 +269,60 @@ def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tm
         with pytest.raises(ValueError, match=message):
             leaderboard_markdown(results, reference=bad)
     with pytest.raises(ValueError, match=r"e\.json repeats seed 0 of b\.json"):
-        leaderboard_markdown([*results, ("e.json", results[1][1])])
+        leaderboard_markdown([*results, ("e.json", {**results[1][1], "notes": "scored again"})])
+
+
+def test_a_results_file_given_twice_is_refused_not_counted_as_two_seeds(arrows, tmp_path):
+    """Its seed unknown (None), a results file given twice, or a copy of it, would count as two seeds."""
+    first = write_result(_result(arrows, seed=None), tmp_path / "a.json")
+    copy = tmp_path / "b.json"
+    copy.write_text(first.read_text())
+    (tmp_path / "sub").mkdir()
+    for twice in ([first, first], [first, tmp_path / "sub" / ".." / "a.json"]):
+        with pytest.raises(ValueError, match=r"a\.json and .*a\.json are the same results file, given twice"):
+            load_results(twice)
+    with pytest.raises(ValueError, match=r"a\.json and .*b\.json hold the same result \(a copy\?\)"):
+        leaderboard_markdown(load_results([first, copy]))
+
+
+def test_two_results_of_unknown_seed_are_not_two_seeds(arrows):
+    """One method, task, track, fingerprint and budget: without their seeds, two results cannot be told
+    apart as seeds (a result of a known seed and one of none neither); under two methods they can."""
+    unknown = [(f"{name}.json", {**_result(arrows, seed=None), "notes": name}) for name in ("a", "b")]
+    message = r"a\.json and b\.json: two results of press at once on DiscreteArrows-v0 .* told apart"
+    with pytest.raises(ValueError, match=message):
+        leaderboard_markdown(unknown)
+    with pytest.raises(ValueError, match=message):
+        leaderboard_markdown([unknown[0], ("b.json", _result(arrows, seed=3))])
+    with pytest.raises(ValueError, match=message):
+        leaderboard_markdown([("a.json", _result(arrows, seed=3)), unknown[1]])
+    other = ("b.json", {**unknown[1][1], "method": "press, again"})
+    assert "| press at once | tactile | 1 |" in leaderboard_markdown([unknown[0], other])
+
+
+def test_the_reference_is_the_registered_conditions_however_many_results_hold_others(arrows):
+    """A task's reference is its registered conditions (the paper's protocol, the dataset backend, typing
+    start seed 0, the registry's limit), never the conditions most results hold: neither typing from
+    start seed 1 nor a live render, recorded as such, flips it."""
+    rendered = evaluate_policy(press, ARROWS, backend="render")
+    assert rendered.conditions["world"]["backend"] == "render"  # not "rig": the env makes its own rig
+    others = [
+        make_result(evaluate_policy(press, ARROWS, env=arrows, seed=1), method="press at once", env_steps=0),
+        make_result(rendered, method="press at once", env_steps=0),
+        make_result(evaluate_policy(press, ARROWS, env=arrows.unwrapped, max_episode_steps=30),
+                    method="press at once", env_steps=0),
+    ]  # fmt: skip
+    registered = ("ours.json", _result(arrows, method="ours", seed=0))
+    results = [(f"{n}-{seed}.json", {**r, "seed": seed}) for n, r in enumerate(others) for seed in range(3)]
+    page = leaderboard_markdown([*results, registered])
+    assert page.count(f"Reference conditions `{registered[1]['fingerprint'][:12]}`") == 1
+    assert "| 1 | ours | tactile | 1 |" in page.split("### Under other conditions")[0]
+    apart = page.split("### Under other conditions")[1]
+    assert "start_seed: 0 -> 1" in apart and 'world.backend: "dataset" -> "render"' in apart
+    assert "max_episode_steps: 25 -> 30" in apart
+    # Where no result holds the registered conditions: the most held of the others, the lowest on a tie.
+    fallback = min(r["fingerprint"] for r in others)
+    assert f"Reference conditions `{fallback[:12]}`" in leaderboard_markdown(results)
 
 
 def test_the_headline_table_takes_the_best_of_the_paper_ours_per_track_and_the_others(arrows, tmp_path):

@@ -4,22 +4,28 @@
 RESULTS are results files (docs/benchmark.md) or run folders and archived
 records (their ``result.json``, or one made from their typing evaluation).
 Per task, results are grouped by method, track, fingerprint and training
-budget (their seeds averaged), and ranked by typing accuracy, then by typing steps. A task's
-reference fingerprint (or the one given) is the one most of its results
-hold among those scored as its registered environment comes: the paper's
-protocol, in the default world (none of the released simulator's rules,
-:data:`~tactile_braille.envs.core.WORLD_RULES`). A reproduction in the
-released simulator's world, however many its runs, never moves the
-reference. Results under other conditions are listed apart with what
-differs, never ranked with the rest (or refused, with ``strict``).
+budget (their seeds averaged), and ranked by typing accuracy, then by typing steps. A results file
+given twice (the same file, or the same content), or two results of a group whose training seed is
+unknown (None), are refused: they cannot be told apart as seeds. A task's reference fingerprint (or
+the one given) is chosen by its conditions, not by counting: the task scored as its registered
+environment comes (:func:`registered_conditions`: the paper's protocol, the default world with none of
+the released simulator's rules, :data:`~tactile_braille.envs.core.WORLD_RULES`, the ``dataset``
+backend, typing start seed 0, the registry's episode limit). Where several fingerprints hold those
+conditions (another dataset or project version), or none does, the one most of those results (or of
+all the task's results) hold, the lowest hash on a tie. A reproduction in the released simulator's
+world, a ``--seed 1`` typing or a live render, however many its runs, never moves the reference.
+Results under other conditions are listed apart with what differs, never ranked with the rest (or
+refused, with ``strict``).
 """
 
 from __future__ import annotations
 
+import json
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 
 from tactile_braille._io import atomic_path
@@ -36,8 +42,12 @@ def load_results(paths) -> list[tuple[str, dict]]:
     """(where, result) for each results file or run folder in ``paths``."""
     from tactile_braille.evaluation.runs import run_result
 
-    loaded = []
+    loaded, given = [], {}
     for path in map(Path, paths):
+        if path.resolve() in given:
+            raise ValueError(f"{given[path.resolve()]} and {path} are the same results file, given twice: "
+                             "give each once (a result counted twice would count as two seeds)")  # fmt: skip
+        given[path.resolve()] = path
         if path.is_dir():
             if not (path / "config.json").exists():
                 raise ValueError(f"{path} is a folder but not a run or a record (no config.json)")
@@ -71,7 +81,13 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
     per row."""
     rows: dict[tuple, Row] = {}
     seeds: dict[tuple, dict] = {}
+    contents: dict[str, str] = {}
     for where, result in results:
+        content = json.dumps(result, sort_keys=True)
+        if content in contents:
+            raise ValueError(f"{contents[content]} and {where} hold the same result (a copy?): give each "
+                             "result once (counted twice it would count as two seeds)")  # fmt: skip
+        contents[content] = where
         budget = result["budget"].get("env_steps")
         key = (result["task"], result["method"], result["track"], result["fingerprint"], budget)
         report = result["report"]
@@ -79,7 +95,14 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
             rows[key] = Row(result["method"], result["track"], result["fingerprint"], [], [], [],
                             report.get("touch_optimum"))  # fmt: skip
         taken = seeds.setdefault(key, {})
-        if result["seed"] is not None and result["seed"] in taken:
+        unknown = taken.get(None) if result["seed"] is not None else next(iter(taken.values()), None)
+        if unknown is not None:
+            raise ValueError(f"{unknown} and {where}: two results of {result['method']} on {result['task']} "
+                             f"({result['track']} track, fingerprint {result['fingerprint'][:12]}, budget "
+                             f"{budget}), not both of known training seed (None: unknown), cannot be told "
+                             "apart as seeds: score each with its --train-seed, or under a --method of its "
+                             "own")  # fmt: skip
+        if result["seed"] in taken:
             raise ValueError(f"{where} repeats seed {result['seed']} of {taken[result['seed']]} "
                              f"({result['method']}, {result['task']})")  # fmt: skip
         taken[result["seed"]] = where
@@ -108,12 +131,25 @@ def _references(given: dict[str, str], results) -> dict[str, str]:
     return resolved
 
 
+def registered_conditions(task: str, conditions: dict) -> bool:
+    """Whether ``conditions`` (a report's) are those ``task`` is scored under as its registered environment
+    comes: the paper's protocol, the default world (the ``dataset`` backend, none of the released
+    simulator's rules), typing start seed 0 and the registry's episode limit."""
+    try:
+        limit = gym.spec(f"tactile_braille/{task}").max_episode_steps
+    except gym.error.Error:  # a task this version does not register: no registered conditions
+        return False
+    world = conditions["world"]
+    return (conditions["protocol"] == "paper" and world.get("backend") == "dataset"
+            and not any(rule in world for rule in WORLD_RULES)
+            and conditions["start_seed"] == 0 and conditions["max_episode_steps"] == limit)  # fmt: skip
+
+
 def _default_reference(results, task: str) -> str:
-    """The fingerprint most of ``task``'s results hold among those scored as the registered environment
-    comes (the paper's protocol, the default world); of all its results where none was."""
+    """The fingerprint of ``task``'s results scored under its :func:`registered_conditions`; where several
+    are (or none is), the one most of those results (or of all the task's) hold, the lowest on a tie."""
     held = [r for _, r in results if r["task"] == task]
-    default = [r for r in held if r["report"]["conditions"]["protocol"] == "paper"
-               and not any(rule in r["report"]["conditions"]["world"] for rule in WORLD_RULES)]  # fmt: skip
+    default = [r for r in held if registered_conditions(task, r["report"]["conditions"])]
     counts = Counter(r["fingerprint"] for r in default or held)
     return min(counts, key=lambda f: (-counts[f], f))
 

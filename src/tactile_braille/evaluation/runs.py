@@ -61,10 +61,11 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
     config, env, agent = load_run(run_dir)
     state = torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")
     epoch, env_steps = int(state["epoch"]), int(state["env_steps"])  # what the scored policy trained
-    report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=sentences)
-    released = evaluate_policy(
-        agent, config.task, env=env, track=config.track, seed=seed, protocol="released", sentences=False
-    )
+    limit = config.max_episode_steps  # the run's own (None: the task's registered one)
+    report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=sentences,
+                             max_episode_steps=limit)  # fmt: skip
+    released = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed,
+                               protocol="released", sentences=False, max_episode_steps=limit)  # fmt: skip
     output = {"task": config.task, "algo": config.algo, "seed": config.seed, "checkpoint_epoch": epoch,
               "typing_seed": seed, **_summary(report), "confusion": report.confusion,
               "fingerprint": report.fingerprint,
@@ -116,7 +117,8 @@ def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
         env = TapMemory(env, config.taps) if config.taps > 1 else env
         if agent is None:  # the checkpoint once: every world has the task's spaces and layout
             _, _, agent = load_run(run_dir, env=env)
-        report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=False)
+        report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=False,
+                                 max_episode_steps=config.max_episode_steps)  # fmt: skip
         output["worlds"][world.name] = {**_summary(report), "fingerprint": report.fingerprint,
                                         "world": report.conditions["world"]}  # fmt: skip
         with atomic_path(path) as temporary:  # after each world: a long evaluation keeps what it scored

@@ -278,38 +278,43 @@ def evaluate_policy(
     one of our agents. ``task``: ``"DiscreteArrows-v0"`` or its full id.
     ``track``: the track the policy competes in (what it learnt from;
     docs/benchmark.md); a ``proprio`` policy's observations also carry the
-    arm's pose (``sensor_pose``), a ``tactile`` one's do not. ``env``: an environment of the task to type in,
-    instead of one made from ``backend``, ``dataset`` and
-    ``max_episode_steps``. Tasks whose keys type text (the alphabet's: their key set's
-    ``types_sentences``) also type :data:`SENTENCES` unless ``sentences`` is false.
+    arm's pose (``sensor_pose``), a ``tactile`` one's do not. ``env``: an environment of the task to type in
+    (one, not a vector environment), instead of one made from ``backend``, ``dataset`` and
+    ``max_episode_steps``. Each key's attempt ends at the protocol's episode limit:
+    ``max_episode_steps``, or else the task's registered one (25 steps), whatever time limit
+    ``env`` has (a longer one, or none, is cut to it; a shorter one is refused). Tasks whose keys
+    type text (the alphabet's: their key set's ``types_sentences``) also type :data:`SENTENCES`
+    unless ``sentences`` is false.
+
+    Raises:
+        TypeError: ``policy`` is not callable, ``task`` not a task's name or ``env`` not one
+            ``gym.Env`` (before any environment is made).
+        ValueError: an unknown task, protocol or track, an episode limit that is not a positive
+            integer, or an ``env`` of another task, of a shorter time limit or (on the tactile track)
+            whose observations carry the arm's pose.
     """
+    _check_arguments(policy, task, env)
     task_id = task if "/" in task else f"tactile_braille/{task}"
     keys = _task_keys(task_id)
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
     if track not in TRACKS:
         raise ValueError(f"track must be one of {TRACKS}, got {track!r}")
+    limit = _episode_limit(task_id, max_episode_steps)
     if env is None:
         options = {"backend": backend, "proprio": track == "proprio"}
         options.update({"dataset": dataset} if dataset is not None else {})
-        env = gym.make(
-            task_id, **options, **({"max_episode_steps": max_episode_steps} if max_episode_steps else {})
-        )
-    elif task_name(env.spec.id) != task_name(task_id):
-        raise ValueError(f"the environment is {env.spec.id}, not {task_id}")
-    elif track == "tactile" and PROPRIO_KEY in env.observation_space.spaces:
-        raise ValueError(
-            f"a tactile-track policy must not see the arm's pose, but this environment's observations "
-            f"carry {PROPRIO_KEY!r} (made with proprio=True): score it as track='proprio' or use a "
-            "tactile environment"
-        )
+        env = gym.make(task_id, **options, max_episode_steps=limit)
+    else:
+        _check_env(env, task_id, track, limit)
+    # The protocol's limit, whatever the environment's own wrapper cuts at (or none, unwrapped).
+    env = gym.wrappers.TimeLimit(env, limit)
     agent = as_agent(policy, env, task_name(task_id))
     sequences = paper_sequences(keys)
     grid = env.unwrapped.task.grid  # the key grid the policy types on (the discrete tasks')
     bound = _bound(env, sequences, protocol, seed)
     result = type_sequences(agent, env, sequences, seed=seed, protocol=protocol)
-    conditions = protocol_conditions(task_id, protocol, sequences, env.spec.max_episode_steps, seed,
-                                     env.unwrapped.world)  # fmt: skip
+    conditions = protocol_conditions(task_id, protocol, sequences, limit, seed, recorded_world(env))
     report = TypingReport(
         task=task_name(task_id), protocol=protocol, track=track, accuracy=result.accuracy,
         total_steps=result.total_steps, keys_asked=sum(map(len, sequences)), sequences=len(sequences),
@@ -322,6 +327,64 @@ def evaluate_policy(
     if KEY_SETS[keys].types_sentences and sentences:
         report.sentences = type_sentences(agent, env, seed + 1_000)
     return report
+
+
+def _check_arguments(policy, task, env) -> None:
+    """TypeErrors for arguments of the wrong kind (:func:`evaluate_policy`), before anything is made."""
+    if not callable(policy) and not hasattr(policy, "policy_action"):
+        raise TypeError(f"a policy must be callable (observation -> action), got {type(policy).__name__}")
+    if isinstance(task, gym.Env | gym.vector.VectorEnv):
+        raise TypeError("task is the task's name (e.g. 'DiscreteArrows-v0'); pass the environment as env=")
+    if not isinstance(task, str):
+        raise TypeError(f"task must be a task's name (e.g. 'DiscreteArrows-v0'), got {type(task).__name__}")
+    if isinstance(env, gym.vector.VectorEnv):
+        raise TypeError(f"env is a vector environment of {env.num_envs}; typing is scored in one "
+                        "environment: pass one made with gym.make(task)")  # fmt: skip
+    if env is not None and not isinstance(env, gym.Env):
+        raise TypeError(
+            f"env must be a gymnasium.Env of the task (made with gym.make), got {type(env).__name__}"
+        )
+
+
+def _episode_limit(task_id: str, max_episode_steps) -> int:
+    """The protocol's episode limit: ``max_episode_steps``, or else the task's registered one."""
+    if max_episode_steps is None:
+        return gym.spec(task_id).max_episode_steps
+    if isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, int) or max_episode_steps < 1:
+        raise ValueError(f"max_episode_steps must be a positive integer or None, got {max_episode_steps!r}")
+    return max_episode_steps
+
+
+def _check_env(env: gym.Env, task_id: str, track: str, limit: int) -> None:
+    """ValueErrors for an environment :func:`evaluate_policy` cannot score ``task_id`` in."""
+    if env.spec is None:
+        raise ValueError(f"the environment has no spec (it was not made with gym.make): make it with "
+                         f"gym.make({task_id!r}, ...)")  # fmt: skip
+    if task_name(env.spec.id) != task_name(task_id):
+        raise ValueError(f"the environment is {env.spec.id}, not {task_id}")
+    if env.spec.max_episode_steps is not None and env.spec.max_episode_steps < limit:
+        raise ValueError(
+            f"the environment's time limit ({env.spec.max_episode_steps} steps) cuts keys short of the "
+            f"protocol's {limit}: pass max_episode_steps={env.spec.max_episode_steps} to score under its "
+            f"limit, or make it with max_episode_steps={limit}"
+        )
+    if track == "tactile" and PROPRIO_KEY in env.observation_space.spaces:
+        raise ValueError(
+            f"a tactile-track policy must not see the arm's pose, but this environment's observations "
+            f"carry {PROPRIO_KEY!r} (made with proprio=True): score it as track='proprio' or use a "
+            "tactile environment"
+        )
+
+
+def recorded_world(env: gym.Env) -> dict:
+    """The world ``env``'s observations come from, as a fingerprint records it: the environment's own
+    record, with the backend it was made with (``render``: a virtual rig the environment makes, which
+    its record calls ``rig``)."""
+    world = env.unwrapped.world
+    spec = env.unwrapped.spec
+    if spec is not None and spec.kwargs.get("backend") == "render" and world.get("backend") == "rig":
+        world = {**world, "backend": "render"}
+    return world
 
 
 def _bound(env: gym.Env, sequences, protocol: str, seed: int) -> float | None:
