@@ -301,3 +301,21 @@ def test_a_resume_whose_log_is_gone_but_whose_checkpoint_covers_epochs_is_refuse
     error = one_line_error(capsys)
     assert "has no progress.csv, but its checkpoint.pt holds epoch 2" in error and "from a backup" in error
     assert files_of(three_epoch_run) == before
+
+
+def test_a_render_run_recorded_as_rig_resumes_and_another_world_is_refused(tmp_path):
+    """The render backend's world names itself ``render``; a run recorded before, as ``rig``, is the same
+    world and resumes; a record of another backend is still refused."""
+    import gymnasium as gym
+
+    from tactile_braille.agents.run import WORLD_FILE, record_world
+
+    env = gym.make(ARROWS, backend="render")
+    assert env.unwrapped.world["backend"] == "render"
+    record_world(tmp_path, env, resume=False)
+    stored = json.loads((tmp_path / WORLD_FILE).read_text())
+    (tmp_path / WORLD_FILE).write_text(json.dumps({**stored, "backend": "rig"}))
+    record_world(tmp_path, env, resume=True)  # no error: the same world under its former name
+    (tmp_path / WORLD_FILE).write_text(json.dumps({**stored, "backend": "dataset"}))
+    with pytest.raises(ValueError, match="trained in another world"):
+        record_world(tmp_path, env, resume=True)

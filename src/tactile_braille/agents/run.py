@@ -172,6 +172,8 @@ def record_world(run_dir: Path, env, resume: bool) -> None:
     if path.exists():
         stored = json.loads(path.read_text())
         stored.pop("dataset", None)  # where the dataset lies may change; what it holds may not
+        if stored.get("backend") == "rig" and world.get("backend") == "render":
+            stored["backend"] = "render"  # recorded before the render backend named itself: the same world
         differ = json_differences(stored, {k: v for k, v in world.items() if k != "dataset"})
         if differ:
             shown = "; ".join(differ[:3]) + (f"; and {len(differ) - 3} more" if len(differ) > 3 else "")

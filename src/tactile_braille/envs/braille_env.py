@@ -35,9 +35,10 @@ def make_backend(
     if backend == "render":
         from tactile_braille.rigs.virtual import VirtualRig
 
-        if frame_noise is None:
-            return RigBackend(VirtualRig(sensor=sensor))
-        return RigBackend(_random_frame_rig(task, sensor, frame_noise))
+        rig = (
+            VirtualRig(sensor=sensor) if frame_noise is None else _random_frame_rig(task, sensor, frame_noise)
+        )
+        return RigBackend(rig, name="render")
     if rig is None:  # backend == "rig"
         raise ValueError("backend='rig' needs a rig (rig=...)")
     return RigBackend(rig)

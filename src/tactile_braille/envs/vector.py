@@ -101,7 +101,7 @@ class VectorBrailleEnv(VectorEnv):
                 import torch
 
                 render_device = "cuda" if torch.cuda.is_available() else None
-            source = RigBackend(VirtualRig(sensor=sensor), device=render_device)
+            source = RigBackend(VirtualRig(sensor=sensor), device=render_device, name="render")
         self._core = BatchedBraille(
             self.task, source, num_envs, proprio=proprio, edges=edges, tap_depth=tap_depth
         )

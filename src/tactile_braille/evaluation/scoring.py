@@ -314,7 +314,7 @@ def evaluate_policy(
     grid = env.unwrapped.task.grid  # the key grid the policy types on (the discrete tasks')
     bound = _bound(env, sequences, protocol, seed)
     result = type_sequences(agent, env, sequences, seed=seed, protocol=protocol)
-    conditions = protocol_conditions(task_id, protocol, sequences, limit, seed, recorded_world(env))
+    conditions = protocol_conditions(task_id, protocol, sequences, limit, seed, env.unwrapped.world)
     report = TypingReport(
         task=task_name(task_id), protocol=protocol, track=track, accuracy=result.accuracy,
         total_steps=result.total_steps, keys_asked=sum(map(len, sequences)), sequences=len(sequences),
@@ -374,17 +374,6 @@ def _check_env(env: gym.Env, task_id: str, track: str, limit: int) -> None:
             f"carry {PROPRIO_KEY!r} (made with proprio=True): score it as track='proprio' or use a "
             "tactile environment"
         )
-
-
-def recorded_world(env: gym.Env) -> dict:
-    """The world ``env``'s observations come from, as a fingerprint records it: the environment's own
-    record, with the backend it was made with (``render``: a virtual rig the environment makes, which
-    its record calls ``rig``)."""
-    world = env.unwrapped.world
-    spec = env.unwrapped.spec
-    if spec is not None and spec.kwargs.get("backend") == "render" and world.get("backend") == "rig":
-        world = {**world, "backend": "render"}
-    return world
 
 
 def _bound(env: gym.Env, sequences, protocol: str, seed: int) -> float | None:
