@@ -30,7 +30,7 @@ import numpy as np
 
 from tactile_braille._io import atomic_path
 from tactile_braille.agents.presets import PRESET_TRACKS, PRESETS
-from tactile_braille.agents.registry import agent_label
+from tactile_braille.agents.registry import agent_label, agent_names
 from tactile_braille.evaluation.report import (
     PAPER_COLUMNS,
     PAPER_TABLE,
@@ -71,8 +71,8 @@ PRESET_TITLES = {
     "fast": "`fast`: ours, with the arm's pose and the key layout",
 }
 """Each preset's heading on the headline page."""
-PRESET_COLOURS = {"paper": "C0", "released": "C1", "fast-tactile": "C2", "fast": "C3"}
-AGENT_COLOURS = {"dqn": "C0", "sac_discrete": "C1", "sac": "C2", "td3": "C3", "planner": "C4"}
+PRESET_COLOURS = {preset: f"C{index}" for index, preset in enumerate(PRESET_ORDER)}
+"""Each preset's colour in the figures, in the order of the tables."""
 PAGES = {
     "ablations": "Variants and ablations: rows that depart from a preset",
     "runs": "Run by run: each row's runs and typing",
@@ -380,7 +380,7 @@ def plot_preset_curves(groups: Groups, path: str | Path) -> Path | None:
             continue
         longest = max(len(r.returns) for _, records in members for r in records)
         for algo, records in members:
-            colour = AGENT_COLOURS.get(algo, "grey")
+            colour = f"C{agent_names().index(algo)}" if algo in agent_names() else "grey"
             for record in records:
                 ax.plot(
                     np.arange(1, len(record.returns) + 1), record.returns, color=colour, lw=0.5, alpha=0.3
