@@ -29,15 +29,20 @@ from tactile_braille.cli import main
 ARROWS = "tactile_braille/DiscreteArrows-v0"
 
 
-@pytest.fixture
-def finished_run(env_datasets, tmp_path) -> Path:
-    """A finished one-epoch DQN run (checkpointed)."""
+def tiny_run(env_datasets, run_dir: Path, epochs: int) -> Path:
+    """A finished DQN run of ``epochs`` epochs of 30 steps, checkpointed after its last epoch."""
     config = TrainConfig(
-        epochs=1, steps_per_epoch=30, start_steps=10, threads=1, dataset=str(env_datasets[ARROWS]),
+        epochs=epochs, steps_per_epoch=30, start_steps=10, threads=1, dataset=str(env_datasets[ARROWS]),
         agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 1, "snapshots": 1},
         replay={"capacity": 2000},
     )  # fmt: skip
-    return train(config, run_dir=tmp_path / "run", progress=False)
+    return train(config, run_dir=run_dir, progress=False)
+
+
+@pytest.fixture
+def finished_run(env_datasets, tmp_path) -> Path:
+    """A finished one-epoch DQN run (checkpointed)."""
+    return tiny_run(env_datasets, tmp_path / "run", epochs=1)
 
 
 def resume(run: Path, *options: str) -> list[str]:
@@ -182,12 +187,7 @@ def test_a_dataset_that_is_neither_a_file_nor_a_default_name_is_refused_before_t
 # ------------------------------------------------------------------ a damaged progress.csv
 @pytest.fixture(scope="module")
 def _three_epoch_original(env_datasets, tmp_path_factory) -> Path:
-    config = TrainConfig(
-        epochs=3, steps_per_epoch=30, start_steps=10, threads=1, dataset=str(env_datasets[ARROWS]),
-        agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 1, "snapshots": 1},
-        replay={"capacity": 2000},
-    )  # fmt: skip
-    return train(config, run_dir=tmp_path_factory.mktemp("three_epochs") / "run", progress=False)
+    return tiny_run(env_datasets, tmp_path_factory.mktemp("three_epochs") / "run", epochs=3)
 
 
 @pytest.fixture
