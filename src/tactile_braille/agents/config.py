@@ -223,7 +223,7 @@ class DQNConfig(AgentConfig):
     goal_difference: int = 0
 
     def __post_init__(self) -> None:
-        _check_hyperparameters(self)
+        super().__post_init__()
         if self.goal_difference < 0:
             raise ValueError(f"goal_difference is a size: at least 0, got {self.goal_difference}")
         if self.goal_difference and self.goal_heads:
@@ -484,7 +484,7 @@ class PlannerConfig(AgentConfig):
     first_press: bool = True
 
     def __post_init__(self) -> None:
-        _check_hyperparameters(self)
+        super().__post_init__()
         problems = []
         if self.press_reading is not None and not 0.0 < self.press_reading <= 1.0:
             problems.append(f"press_reading is a probability in (0, 1], got {self.press_reading}")
