@@ -470,7 +470,10 @@ def test_the_results_pages_are_written_whole_and_again_byte_for_byte(records_tre
         "none: the preset's own row", "replay.relabel=all", "run as an ablation"
     ]  # fmt: skip
     assert rows[2].endswith("| `results/ablation-x/` |")  # an ablation with the preset's settings
-    assert "## DiscreteArrows-v0, DQN (paper, bf16, replay.relabel=all)" in text["results-runs.md"]
+    assert (
+        "## DiscreteArrows-v0, DQN (paper, bf16, replay.relabel=all), track `tactile`"
+        in text["results-runs.md"]
+    )
     tuning = text["results-tuning.md"]
     assert (
         "| `DAr_relabel-all_100` | disc arrow | DQN | paper, bf16, replay.relabel=all | tactile | 100 |"

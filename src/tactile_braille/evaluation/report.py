@@ -824,7 +824,7 @@ def group_sections(groups: dict, figures: Path, link: str, written: set[str]) ->
         name = f"{task.split('-')[0]}__{algo}" + (
             f"__{variant}".replace(", ", "_").replace(" ", "-") if variant else ""
         )
-        lines += [f"## {task}, {_label(algo, variant)}", ""]
+        lines += [f"## {task}, {_label(algo, variant)}, track `{records[0].track}`", ""]
         lines += [_run_line(r) for r in records]
         typed = [r for r in records if r.typing]
         if typed:
