@@ -25,7 +25,7 @@ from tactile_braille.evaluation.leaderboard import (
     write_headline,
 )
 from tactile_braille.evaluation.protocol import paper_sequences
-from tactile_braille.evaluation.results import make_result, read_result, write_result
+from tactile_braille.evaluation.results import make_result, read_result, seal, write_result
 from tactile_braille.evaluation.runs import run_method
 
 ARROWS = "tactile_braille/DiscreteArrows-v0"
@@ -210,9 +210,15 @@ def test_touch_optimum_has_known_values():
 
 
 # ---------------------------------------------------------------- results files
-def _result(arrows, method="press at once", seed=0, **options):
+def _result(arrows, method="press at once", seed=0, notes="", **options):
     return make_result(evaluate_policy(press, ARROWS, env=arrows, **options), method=method, seed=seed,
-                       env_steps=0)  # fmt: skip
+                       env_steps=0, notes=notes)  # fmt: skip
+
+
+def _with_seed(result: dict, seed: int) -> dict:
+    """``result`` as its method would have written it for training seed ``seed``: sealed again."""
+    changed = {name: value for name, value in result.items() if name != "seal"} | {"seed": seed}
+    return {**changed, "seal": seal(changed)}
 
 
 def test_a_results_file_round_trips_and_refuses_edits(arrows, tmp_path):
@@ -237,6 +243,72 @@ def test_a_results_file_round_trips_and_refuses_edits(arrows, tmp_path):
         make_result(evaluate_policy(press, ARROWS, env=arrows), method=" ")
     with pytest.raises(ValueError, match="env_steps must be a non-negative integer"):
         make_result(evaluate_policy(press, ARROWS, env=arrows), method="x", env_steps=-1)
+
+
+def _set(*edits):
+    """Edits of a results file's fields: (path, value) pairs, a path such as ``report.accuracy`` or
+    ``report.confusion.counts.0.0``, a value or a function of the old one."""
+
+    def edit(result):
+        for path, value in zip(edits[::2], edits[1::2], strict=True):
+            *parents, last = (int(name) if name.isdigit() else name for name in path.split("."))
+            node = result
+            for name in parents:
+                node = node[name]
+            node[last] = value(node[last]) if callable(value) else value
+        return result
+
+    return edit
+
+
+def _more_steps(result):
+    report = result["report"]
+    steps = report["total_steps"] + 1
+    return _set("report.total_steps", steps, "report.steps_per_key", steps / report["keys_asked"])(result)
+
+
+EDITS = {
+    "accuracy raised, plausibly": (_set("report.accuracy", 0.99),
+                                   r"accuracy \(0\.99\) contradicts its confusion matrix \(\d+ of 96"),
+    "accuracy above 1": (_set("report.accuracy", 1.7), r"accuracy must be a number in \[0, 1\], got 1\.7$"),
+    "accuracy NaN": (_set("report.accuracy", float("nan")), r"accuracy must .*, got nan$"),
+    "accuracy a word": (_set("report.accuracy", "high"), r"accuracy must .*, got 'high'$"),
+    "steps fewer than keys": (_set("report.total_steps", 50), r"report\.total_steps \(50\) must lie between"),
+    "steps per key left": (_set("report.total_steps", lambda n: n + 1), r"steps_per_key \(8\.0\) is not"),
+    "steps edited, in range": (_more_steps, r"\['report\.total_steps', 'report\.steps_per_key'\] were"),
+    "keys asked edited": (_set("report.keys_asked", 100), r"differ from the 96 keys in 24 sequences"),
+    "confusion edited": (_set("report.confusion.counts.0.0", lambda n: n + 1), r"counts \d+ goals 'UP'"),
+    "method renamed": (_set("method", "someone else's"), r"\['method'\] were changed after the file was"),
+    "seed changed": (_set("seed", 7), r"\['seed'\] were changed"),
+    "budget cut": (_set("budget.env_steps", 10), r"\['budget'\] were changed"),
+    "field added": (_set("report.note", "x"), r"\['report\.note'\] were added"),
+    "seal removed": (lambda r: {k: v for k, v in r.items() if k != "seal"}, r"lacks \['seal'\]"),
+    "unsealed format": (_set("format", "tactile_braille.result/1"), r"written before results files were"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("edit, message", EDITS.values(), ids=EDITS)
+def test_an_edited_results_file_is_refused_naming_the_field(arrows, tmp_path, capsys, edit, message):
+    """The numbers are checked against each other and the file against its seal: an edit, plausible or
+    impossible, is refused by the reader and by the leaderboard, in one line."""
+    path = write_result(_result(arrows), tmp_path / "press.json")
+    path.write_text(json.dumps(edit(json.loads(path.read_text()))))
+    with pytest.raises(ValueError, match=message):
+        read_result(path)
+    assert main(["leaderboard", str(path), "--output", str(tmp_path / "board.md")]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "Traceback" not in error and not (tmp_path / "board.md").exists()
+
+
+def test_a_perfect_typing_cannot_claim_fewer_steps_than_the_world_allows(arrows, tmp_path):
+    oracle = make_result(
+        evaluate_policy(lambda o: oracle_action(arrows), ARROWS, env=arrows), method="oracle"
+    )
+    assert oracle["report"]["accuracy"] == 1.0 and oracle["report"]["typing_bound"] == 242
+    edited = {**oracle, "report": {**oracle["report"], "total_steps": 200, "steps_per_key": 200 / 96}}
+    with pytest.raises(ValueError, match=r"total_steps \(200\) is below the fewest steps the world allows"):
+        write_result(edited, tmp_path / "oracle.json")
+    assert not (tmp_path / "oracle.json").exists()
 
 
 def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tmp_path):
@@ -269,7 +341,7 @@ def test_the_leaderboard_ranks_one_fingerprint_and_shows_others_apart(arrows, tm
         with pytest.raises(ValueError, match=message):
             leaderboard_markdown(results, reference=bad)
     with pytest.raises(ValueError, match=r"e\.json repeats seed 0 of b\.json"):
-        leaderboard_markdown([*results, ("e.json", {**results[1][1], "notes": "scored again"})])
+        leaderboard_markdown([*results, ("e.json", _result(arrows, seed=0, notes="scored again"))])
 
 
 def test_a_results_file_given_twice_is_refused_not_counted_as_two_seeds(arrows, tmp_path):
@@ -288,7 +360,7 @@ def test_a_results_file_given_twice_is_refused_not_counted_as_two_seeds(arrows, 
 def test_two_results_of_unknown_seed_are_not_two_seeds(arrows):
     """One method, task, track, fingerprint and budget: without their seeds, two results cannot be told
     apart as seeds (a result of a known seed and one of none neither); under two methods they can."""
-    unknown = [(f"{name}.json", {**_result(arrows, seed=None), "notes": name}) for name in ("a", "b")]
+    unknown = [(f"{name}.json", _result(arrows, seed=None, notes=name)) for name in ("a", "b")]
     message = r"a\.json and b\.json: two results of press at once on DiscreteArrows-v0 .* told apart"
     with pytest.raises(ValueError, match=message):
         leaderboard_markdown(unknown)
@@ -296,7 +368,7 @@ def test_two_results_of_unknown_seed_are_not_two_seeds(arrows):
         leaderboard_markdown([unknown[0], ("b.json", _result(arrows, seed=3))])
     with pytest.raises(ValueError, match=message):
         leaderboard_markdown([("a.json", _result(arrows, seed=3)), unknown[1]])
-    other = ("b.json", {**unknown[1][1], "method": "press, again"})
+    other = ("b.json", _result(arrows, seed=None, method="press, again"))
     assert "| press at once | tactile | 1 |" in leaderboard_markdown([unknown[0], other])
 
 
@@ -313,7 +385,7 @@ def test_the_reference_is_the_registered_conditions_however_many_results_hold_ot
                     method="press at once", env_steps=0),
     ]  # fmt: skip
     registered = ("ours.json", _result(arrows, method="ours", seed=0))
-    results = [(f"{n}-{seed}.json", {**r, "seed": seed}) for n, r in enumerate(others) for seed in range(3)]
+    results = [(f"{n}-{seed}.json", _with_seed(r, seed)) for n, r in enumerate(others) for seed in range(3)]
     page = leaderboard_markdown([*results, registered])
     assert page.count(f"Reference conditions `{registered[1]['fingerprint'][:12]}`") == 1
     assert "| 1 | ours | tactile | 1 |" in page.split("### Under other conditions")[0]
@@ -361,7 +433,7 @@ def test_the_leaderboard_names_the_released_simulators_rules_of_a_world(continuo
     ]  # fmt: skip
     assert results[0][1]["fingerprint"] != results[1][1]["fingerprint"]  # two worlds, never ranked together
     # Unasked, the reference is the default world's, though the released world's seeds outnumber it.
-    more = [(f"released{seed}.json", {**results[1][1], "seed": seed}) for seed in (1, 2)]
+    more = [(f"released{seed}.json", _with_seed(results[1][1], seed)) for seed in (1, 2)]
     page = leaderboard_markdown([*results, *more])
     assert "| 1 | ours | tactile | 1 |" in page.split("### Under other conditions")[0]
     assert "| released | tactile | 3 |" in page.split("### Under other conditions")[1]

@@ -33,7 +33,7 @@ from tactile_braille.agents.registry import agent_label
 from tactile_braille.agents.run import json_differences
 from tactile_braille.envs.core import WORLD_RULES
 from tactile_braille.evaluation.report import PAPER_TABLE, TASK_NAMES, TRACK_TITLES
-from tactile_braille.evaluation.results import read_result
+from tactile_braille.evaluation.results import check_result, read_result
 
 PAPER_METHOD = "Church et al. 2020, Table III (sim)"
 
@@ -78,11 +78,12 @@ class Row:
 
 def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
     """Rows per task: results grouped by (method, track, fingerprint, training budget); one seed once
-    per row."""
+    per row; each result checked and its seal verified (:func:`check_result`)."""
     rows: dict[tuple, Row] = {}
     seeds: dict[tuple, dict] = {}
     contents: dict[str, str] = {}
     for where, result in results:
+        check_result(result, where)  # given in memory, checked as a file is when it is read
         content = json.dumps(result, sort_keys=True)
         if content in contents:
             raise ValueError(f"{contents[content]} and {where} hold the same result (a copy?): give each "
