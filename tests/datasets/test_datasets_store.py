@@ -35,6 +35,7 @@ from tactile_braille.datasets.store import (
     ResumeMismatchError,
     TactileDataset,
     load_dataset,
+    samples_digest,
 )
 from tactile_braille.keyboard.layout import NONE_KEY
 from tactile_braille.rigs.base import RigError
@@ -503,6 +504,27 @@ def test_every_array_is_checked(tmp_path, perturbed_path):
         )
         with pytest.raises(DatasetError, match=f"lacks the array '{name}'"):
             load_dataset(path)
+
+
+def test_the_samples_digest_is_recorded_when_written_and_checked_when_read(tmp_path, perturbed_path):
+    """A file's samples are digested once, when it is written; a change to them afterwards, however it
+    was made (here frames mirrored through h5py, the file's record left as it was), is refused on open."""
+    dataset = load_dataset(perturbed_path)
+    with h5py.File(perturbed_path, "r") as handle:
+        assert (
+            handle.attrs["samples_sha256"]
+            == dataset.samples_sha256
+            == samples_digest({name: getattr(dataset, name) for name in ARRAY_NAMES})
+        )
+    mirror = replace_array("observations", lambda a: a[:, :, ::-1])
+    mirrored = mutated_copy(perturbed_path, tmp_path / "mirrored.h5", mirror)
+    with pytest.raises(DatasetError, match=r"its samples differ from those it held when it was written"):
+        load_dataset(mirrored)
+    # A file written before digests were recorded has its digest taken when it is read.
+    unrecorded = mutated_copy(
+        perturbed_path, tmp_path / "old.h5", lambda h: h.attrs.__delitem__("samples_sha256")
+    )
+    assert load_dataset(unrecorded).samples_sha256 == dataset.samples_sha256
 
 
 # --- expectations --------------------------------------------------------------------------------

@@ -201,6 +201,59 @@ def test_the_fingerprint_changes_with_what_decides_the_score(arrows, monkeypatch
     assert scoring.fingerprint(moved) == base.fingerprint
 
 
+def test_the_fingerprint_covers_the_datasets_samples(env_datasets, tmp_path, monkeypatch):
+    """Two datasets of the same parameters but other samples (frames mirrored, the file's digest made
+    anew) are two worlds; a default dataset holding the reference generation's samples is named by its
+    parameters alone, as the leaderboard's results were scored."""
+    import h5py
+
+    from tactile_braille.datasets import cache
+    from tactile_braille.datasets.store import load_dataset, samples_digest
+
+    original = load_dataset(env_datasets[ARROWS])
+    mirrored = tmp_path / "mirrored.h5"
+    mirrored.write_bytes(env_datasets[ARROWS].read_bytes())
+    with h5py.File(mirrored, "r+") as handle:
+        frames = handle["observations"][()][:, :, ::-1]
+        del handle["observations"]
+        handle.create_dataset("observations", data=frames)
+        arrays = {
+            name: handle[name][()] for name in ("observations", "poses", "labels", "pressed", "tap_index")
+        }
+        handle.attrs["samples_sha256"] = samples_digest(arrays)
+    reports = [evaluate_policy(press, ARROWS, dataset=path) for path in (env_datasets[ARROWS], mirrored)]
+    worlds = [report.conditions["world"] for report in reports]
+    assert worlds[0]["samples_sha256"] == original.samples_sha256 != worlds[1]["samples_sha256"]
+    assert reports[0].fingerprint != reports[1].fingerprint
+    # As a reference generation (here: the small dataset made the reference), no digest in the world.
+    version = original.metadata.generator_version
+    monkeypatch.setattr(cache, "REFERENCE_SAMPLES", {version: {"keys-train": original.samples_sha256}})
+    monkeypatch.setattr(cache, "_default_collection", lambda *args: (None, None, original.metadata))
+    world = evaluate_policy(press, ARROWS, dataset=env_datasets[ARROWS]).conditions["world"]
+    assert "samples_sha256" not in world and world == {
+        k: v for k, v in worlds[0].items() if k != "samples_sha256"
+    }
+
+
+def test_the_reference_samples_name_every_default_dataset_of_this_generator():
+    from tactile_braille.datasets.cache import DEFAULT_DATASETS, REFERENCE_SAMPLES
+    from tactile_braille.datasets.collector import GENERATOR_VERSION
+
+    assert set(REFERENCE_SAMPLES[GENERATOR_VERSION]) == set(DEFAULT_DATASETS)
+
+
+@pytest.mark.slow
+def test_a_fresh_generation_of_a_default_dataset_holds_the_reference_samples(tmp_path, monkeypatch):
+    """The leaderboard's fingerprints name the default datasets by their parameters: a generation on
+    this machine must hold the reference samples (else results scored here carry their digest)."""
+    from tactile_braille.datasets.cache import REFERENCE_SAMPLES, default_dataset
+    from tactile_braille.datasets.collector import GENERATOR_VERSION
+
+    monkeypatch.setenv("TACTILE_BRAILLE_DATA", str(tmp_path))
+    dataset = default_dataset("keys-validation", progress=False)
+    assert dataset.samples_sha256 == REFERENCE_SAMPLES[GENERATOR_VERSION]["keys-validation"]
+
+
 def test_touch_optimum_has_known_values():
     # Arrows, a reset per key: from a uniform start cell, 24 x 4 keys (docs/evaluation.md).
     assert touch_optimum("arrows", paper_sequences("arrows"), "released") == pytest.approx(228.0)

@@ -174,6 +174,8 @@ def record_world(run_dir: Path, env, resume: bool) -> None:
         stored.pop("dataset", None)  # where the dataset lies may change; what it holds may not
         if stored.get("backend") == "rig" and world.get("backend") == "render":
             stored["backend"] = "render"  # recorded before the render backend named itself: the same world
+        if "samples_sha256" not in stored:  # recorded before worlds held their samples' digest
+            world.pop("samples_sha256", None)
         differ = json_differences(stored, {k: v for k, v in world.items() if k != "dataset"})
         if differ:
             shown = "; ".join(differ[:3]) + (f"; and {len(differ) - 3} more" if len(differ) > 3 else "")

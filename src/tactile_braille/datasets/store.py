@@ -9,7 +9,9 @@ Layout of a finished file (``FORMAT_NAME``, ``FORMAT_VERSION``)::
     /pressed       int16  (N,)       index into key_names of the key that actuated
     /tap_index     int64  (N,)       position of the tap in its procedure
     attrs: format, format_version, key_names, procedure, keyboard, sensor, rig,
-           seed, generator_version, created_utc (JSON strings where structured)
+           seed, generator_version, created_utc (JSON strings where structured),
+           samples_sha256 (:func:`samples_digest` of the arrays, taken when the
+           file was written and checked whenever it is read)
 
 Crash safety. While a collection runs, samples go to *shards*: small HDF5
 files in ``<path>.partial/``, each written to a temporary name and renamed
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import hashlib
 import json
 import os
 import shutil
@@ -129,15 +132,28 @@ class DatasetMetadata:
         return json.loads(json.dumps(self.to_attrs()))
 
 
+def samples_digest(arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 of a dataset's samples: each array's name, dtype, shape and bytes (C order), in the
+    layout's order; the metadata aside (the fingerprint records it separately)."""
+    digest = hashlib.sha256()
+    for name in _ARRAYS:
+        data = np.ascontiguousarray(arrays[name], dtype=np.dtype(_DTYPES[name]).newbyteorder("<"))
+        digest.update(f"{name}:{data.dtype.str}:{data.shape};".encode())
+        digest.update(data.tobytes())
+    return digest.hexdigest()
+
+
 def _write_arrays(
     path: Path, arrays: dict[str, np.ndarray], metadata: DatasetMetadata, compress: bool
 ) -> None:
     """Write a complete file to a temporary name, flush it to disk, rename it into place."""
+    arrays = {name: np.asarray(arrays[name], dtype=_DTYPES[name]) for name in _ARRAYS}
     with atomic_path(path, fsync=True) as temporary, h5py.File(temporary, "w") as handle:
         handle.attrs.update(metadata.to_attrs())
         handle.attrs["created_utc"] = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+        handle.attrs["samples_sha256"] = samples_digest(arrays)
         for name in _ARRAYS:
-            data = np.asarray(arrays[name], dtype=_DTYPES[name])
+            data = arrays[name]
             options = {}
             if compress and len(data):
                 chunk_rows = max(1, min(len(data), 32 if name == "observations" else 65536))
@@ -146,7 +162,9 @@ def _write_arrays(
             handle.create_dataset(name, data=data, **options)
 
 
-def _read_arrays(path: Path) -> tuple[DatasetMetadata, dict[str, np.ndarray]]:
+def _read_arrays(path: Path) -> tuple[DatasetMetadata, dict[str, np.ndarray], str]:
+    """A file's metadata, arrays and samples digest, checked against the digest it recorded (a file
+    written before digests were recorded has its digest taken now)."""
     try:
         handle = h5py.File(path, "r")
     except FileNotFoundError:
@@ -170,8 +188,16 @@ def _read_arrays(path: Path) -> tuple[DatasetMetadata, dict[str, np.ndarray]]:
                 arrays[name] = dataset[()]
             except OSError as error:
                 raise DatasetError(f"{path}: cannot read {name} (corrupt or truncated?): {error}") from None
+        recorded = handle.attrs.get("samples_sha256")
     _validate_arrays(arrays, metadata, path)
-    return metadata, arrays
+    digest = samples_digest(arrays)
+    if recorded is not None and recorded != digest:
+        raise DatasetError(
+            f"{path}: its samples differ from those it held when it was written (digest {digest[:12]}, "
+            f"recorded {str(recorded)[:12]}): it was changed or damaged; collect it again (a default "
+            "dataset: delete the file and it is generated again)"
+        )
+    return metadata, arrays, digest
 
 
 def _validate_arrays(arrays: dict[str, np.ndarray], metadata: DatasetMetadata, source: object) -> None:
@@ -359,11 +385,13 @@ class TactileDataset:
     Attributes:
         path: where it was read from.
         metadata: its metadata.
+        samples_sha256: :func:`samples_digest` of the arrays (checked against the file's record).
         observations, poses, labels, pressed, tap_index: the arrays.
     """
 
     path: Path
     metadata: DatasetMetadata
+    samples_sha256: str
     observations: np.ndarray
     poses: np.ndarray
     labels: np.ndarray
@@ -404,7 +432,7 @@ def load_dataset(
         DatasetError: missing, corrupt, truncated, foreign or mismatched file.
     """
     path = Path(path)
-    metadata, arrays = _read_arrays(path)
+    metadata, arrays, digest = _read_arrays(path)
     for what, expected, actual in (
         ("keyboard", expect_keyboard, metadata.keyboard),
         ("sensor", expect_sensor, metadata.sensor),
@@ -421,4 +449,4 @@ def load_dataset(
         raise DatasetError(
             f"{path} holds a {metadata.procedure.get('procedure')!r} dataset, expected {expect_procedure!r}"
         )
-    return TactileDataset(path=path, metadata=metadata, **arrays)
+    return TactileDataset(path=path, metadata=metadata, samples_sha256=digest, **arrays)

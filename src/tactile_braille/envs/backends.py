@@ -79,9 +79,14 @@ class DatasetBackend:
             self._index_keys(dataset)
 
     def describe(self) -> dict:
-        """The world the images come from: the dataset (procedure, seed, generator), its rig's parameters."""
+        """The world the images come from: the dataset (procedure, seed, generator), its rig's parameters,
+        and its samples' digest (``samples_sha256``) unless it is a default dataset holding the reference
+        generation's samples (:func:`~tactile_braille.datasets.cache.reference_samples`), which its
+        parameters name exactly."""
+        from tactile_braille.datasets.cache import reference_samples
+
         metadata = self.dataset.metadata
-        return {
+        world = {
             "backend": self.name,
             "dataset": str(self.dataset.path),
             "procedure": metadata.procedure,
@@ -91,6 +96,9 @@ class DatasetBackend:
             "keyboard": metadata.keyboard,
             "sensor": metadata.sensor,
         }
+        if not reference_samples(self.dataset):
+            world["samples_sha256"] = self.dataset.samples_sha256
+        return world
 
     # ---------------------------------------------------------- discrete
     def _index_keys(self, dataset: TactileDataset) -> None:
