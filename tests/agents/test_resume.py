@@ -319,3 +319,62 @@ def test_a_render_run_recorded_as_rig_resumes_and_another_world_is_refused(tmp_p
     (tmp_path / WORLD_FILE).write_text(json.dumps({**stored, "backend": "dataset"}))
     with pytest.raises(ValueError, match="trained in another world"):
         record_world(tmp_path, env, resume=True)
+
+
+# ---------------------------------------------------------------- exact resumes
+EXACT = TrainConfig(
+    epochs=4, steps_per_epoch=30, start_steps=10, threads=1, seed=1, precision="fp32",
+    agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 2, "snapshots": 1},
+    replay={"capacity": 2000}, keep_pose_fraction=0.5,
+)  # fmt: skip
+"""Epochs of 30 steps and episodes of up to 25: most checkpoints fall inside an episode; half the
+episodes keep the pose the last one left (the reset a resume must put back)."""
+KILLS = {
+    "mid-episode, epoch 1": "Episodes.step", "mid-episode, epoch 2": "Episodes.step",
+    "between a row and its checkpoint": "EpochLog.write", "mid-checkpoint": "EpisodeReplayBuffer.save",
+}  # fmt: skip
+AT = {"mid-episode, epoch 1": 47, "mid-episode, epoch 2": 71, "between a row and its checkpoint": 3,
+      "mid-checkpoint": 2}  # fmt: skip
+"""The call of the patched function after which the process kills itself (kill -9)."""
+
+
+def _kill_at(run: Path, config: TrainConfig, where: str, call: int) -> None:
+    """Train ``config`` into ``run`` in a process that kills itself with SIGKILL right after the
+    ``call``-th call of ``where`` (a function of the loop), as ``kill -9`` would at that moment."""
+    script = f"""
+import json, os, signal
+from tactile_braille.agents import training, replay, run as run_module
+from tactile_braille.agents.config import TrainConfig
+owner = {{"Episodes": training.Episodes, "EpochLog": run_module.EpochLog,
+          "EpisodeReplayBuffer": replay.EpisodeReplayBuffer}}[{where.split(".")[0]!r}]
+original, calls = getattr(owner, {where.split(".")[1]!r}), [0]
+def patched(*args, **kwargs):
+    result = original(*args, **kwargs)
+    calls[0] += 1
+    if calls[0] == {call}:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return result
+setattr(owner, {where.split(".")[1]!r}, patched)
+training.train(TrainConfig.from_json(json.loads({json.dumps(config.to_json())!r})), run_dir={str(run)!r}, progress=False)
+"""
+    child = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=300)
+    assert child.returncode == -signal.SIGKILL, child.stderr.decode()[-2000:]
+
+
+def _rows_but_time(run: Path) -> list[dict]:
+    return [{k: v for k, v in row.items() if k not in ("charts/SPS", "time_s")} for row in read_progress(run)]
+
+
+@pytest.mark.slow
+def test_a_run_killed_anywhere_and_resumed_logs_the_uninterrupted_runs_rows(env_datasets, tmp_path):
+    """Killed with -9 inside an episode, between logging an epoch and checkpointing it, or while
+    checkpointing, and resumed: every column of progress.csv but the timings is the uninterrupted run's."""
+    config = EXACT.with_changes(dataset=str(env_datasets[ARROWS]))
+    whole = train(config, run_dir=tmp_path / "whole", progress=False)
+    expected = _rows_but_time(whole)
+    assert len(expected) == 4
+    for name, where in KILLS.items():
+        run = tmp_path / name.replace(" ", "_").replace(",", "")
+        _kill_at(run, config, where, AT[name])
+        train(run_dir=run, resume=True, progress=False)
+        assert _rows_but_time(run) == expected, name

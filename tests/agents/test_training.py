@@ -174,13 +174,15 @@ def test_td3_training_bursts_checkpoints_and_resumes(env_datasets, tmp_path, rec
     data = json.loads((run / "config.json").read_text())
     data["epochs"] = 3
     (run / "config.json").write_text(json.dumps(data))
+    # The episode in progress at the checkpoint is played again into the replay first.
+    replayed = len(torch.load(run / "checkpoint.pt", weights_only=False)["episode"]["actions"])
     train(run_dir=run, resume=True, progress=False)
     rows = read_progress(run)
     assert [row["epoch"] for row in rows] == [0.0, 1.0, 2.0]
     assert rows[-1]["env_steps"] == 90.0
     resumed = recording[-1]
-    assert len(resumed.sizes) == 30
-    more = expected_updates(resumed.sizes, 60, config)
+    assert len(resumed.sizes) == replayed + 30
+    more = expected_updates(resumed.sizes[replayed:], 60, config)
     assert rows[-1]["updates"] == expected + more
     assert resumed.samples == more
     assert run_files(run)["replay"] == ["replay.2.npz"]

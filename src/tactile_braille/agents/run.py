@@ -21,7 +21,7 @@ import hashlib
 import io
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -48,11 +48,15 @@ TIMING_FIELDS = ("charts/SPS", "time_s")
 
 @dataclass
 class Counters:
-    """Where a run stands: the next epoch to run, environment steps and gradient updates so far."""
+    """Where a run stands: the next epoch to run, environment steps and gradient updates so far, and
+    what the training loop carries across epochs: the episode in progress
+    (:meth:`~tactile_braille.agents.training.Episodes.state`) and the last value of each loss."""
 
     epoch: int = 0
     env_steps: int = 0
     updates: int = 0
+    episode: dict | None = None
+    losses: dict = field(default_factory=dict)
 
 
 LOCK_FILE = ".lock"
@@ -213,7 +217,10 @@ def save_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator, coun
 
     ``counters.epoch`` is the epoch just finished. Each step is atomic, so a
     crash anywhere leaves the previous checkpoint and the buffer it names
-    intact. The episode in progress is not saved: it restarts on resume.
+    intact. The checkpoint holds every generator the loop draws from (the
+    run's, torch's) and the episode in progress as the loop records it
+    (``counters.episode``: its reset and its actions so far), which a resume
+    plays again, so that it goes on as the uninterrupted run did.
     """
     replay = f"replay.{counters.epoch}.npz"
     buffer.save(run_dir / replay)
@@ -224,6 +231,7 @@ def save_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator, coun
         "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
         "epoch": counters.epoch, "env_steps": counters.env_steps, "updates": counters.updates,
         "replay": replay, "progress_rows": len(rows), "progress_sha256": progress_digest(rows),
+        "episode": counters.episode, "losses": dict(counters.losses),
     }  # fmt: skip
     with atomic_path(run_dir / CHECKPOINT_FILE, fsync=True) as temporary:
         torch.save(state, temporary)
@@ -241,7 +249,8 @@ def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -
         return Counters()
     state = _read_checkpoint(path, agent.device)
     try:
-        counters = Counters(int(state["epoch"]) + 1, int(state["env_steps"]), int(state["updates"]))
+        counters = Counters(int(state["epoch"]) + 1, int(state["env_steps"]), int(state["updates"]),
+                            state.get("episode"), dict(state.get("losses", {})))  # fmt: skip
         agent.load_state_dict(state["agent"])
     except Exception as error:  # a checkpoint of another agent, or one missing its entries
         raise _unreadable(path, error) from None

@@ -94,9 +94,10 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
         warm_start(run_dir, config, agent)
     write_config(run_dir, config)  # a resume's new epochs or machine, once its world and checkpoint are read
     extension = make_extension(config, env, agent, buffer, run_dir)
-    episodes = Episodes(env, buffer, extension, rng, config.keep_pose_fraction, config.final_press)
+    episodes = Episodes(env, buffer, extension, rng, config.keep_pose_fraction, config.final_press,
+                        resume=counters.episode)  # fmt: skip
     burst, batch_size = config.update_every * config.updates_per_step, config.agent.batch_size
-    losses: dict[str, float] = {}
+    losses: dict[str, float] = counters.losses
     with EpochLog(
         run_dir, config.epochs, counters.epoch, progress, counters.env_steps if resume else None
     ) as log:
@@ -129,6 +130,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
             if epoch in snapshot_epochs(config.epochs, config.evaluation.snapshots):
                 save_snapshot(run_dir, agent, epoch)
             if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
+                counters.episode, counters.losses = episodes.state(), losses
                 save_checkpoint(run_dir, agent, buffer, rng, counters)
     return run_dir
 
@@ -181,6 +183,13 @@ class Episodes:
     (``reset(options={"keep_pose": True})``, as between the keys the paper's
     typing evaluation asks in a row). With ``final_press`` the last step an
     episode's time limit allows presses (:func:`pressing`), whatever was asked.
+
+    :meth:`state` is the episode in progress as a checkpoint keeps it: its
+    reset (seed, whether it kept the pose, and the pose it kept) and the
+    actions taken so far. ``resume`` (such a state) plays that episode again
+    into the environment and the replay, drawing nothing from ``rng``: on the
+    dataset backend, whose taps draw only from the environment's own generator,
+    it ends where the interrupted run stood.
     """
 
     def __init__(
@@ -191,24 +200,47 @@ class Episodes:
         rng,
         keep_pose_fraction: float = 0.0,
         final_press: bool = False,
+        resume: dict | None = None,
     ) -> None:
         self.env, self.buffer, self.extension, self.rng = env, buffer, extension, rng
         self.keep_pose_fraction = keep_pose_fraction
         self.last_step = env.spec.max_episode_steps if final_press else None
         self.returns: list[float] = []
         self.kept_starts = self.final_presses = 0
-        self._start(first=True)
+        if resume is None:
+            self._start(first=True)
+            return
+        self.kept_starts, self.final_presses = resume["kept_starts"], resume["final_presses"]
+        if resume["kept_pose"] is not None:  # the pose the episode kept: where the one before it ended
+            self.env.reset(seed=resume["seed"])
+            self.env.unwrapped.place_sensor(resume["kept_pose"])
+        self._reset(resume["seed"], resume["kept_pose"] is not None)
+        final_presses = self.final_presses
+        for action in resume["actions"]:
+            self.step(action)
+        self.final_presses = final_presses  # counted when they were first taken
 
     def _start(self, first: bool = False) -> None:
         seed = int(self.rng.integers(2**31))
         keep = not first and self.keep_pose_fraction > 0 and self.rng.random() < self.keep_pose_fraction
         self.kept_starts += keep
+        self._reset(seed, keep)
+
+    def _reset(self, seed: int, keep: bool) -> None:
+        kept = self.env.unwrapped.sensor_placement() if keep else None
         self.observation, info = self.env.reset(seed=seed, options={"keep_pose": True} if keep else None)
         self.buffer.start_episode(self.observation, self.extension.label(self.observation, info))
         self.episode_return, self.episode_steps = 0.0, 0
+        self._episode = {"seed": seed, "kept_pose": kept, "actions": []}
+
+    def state(self) -> dict:
+        """The episode in progress, as ``resume`` takes it (JSON-ready but for NumPy actions)."""
+        return {**self._episode, "actions": list(self._episode["actions"]),
+                "kept_starts": self.kept_starts, "final_presses": self.final_presses}  # fmt: skip
 
     def step(self, action) -> None:
         """One environment step, stored; a new episode if it ended."""
+        self._episode["actions"].append(np.array(action, copy=True))
         self.episode_steps += 1
         if self.episode_steps == self.last_step:
             action = pressing(self.env.action_space, action)

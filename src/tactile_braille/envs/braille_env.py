@@ -116,6 +116,20 @@ class BrailleEnv(gym.Env):
         """The task's keys, in the order of the goal one-hots."""
         return self._core.goal_keys
 
+    def sensor_placement(self) -> dict:
+        """Where the sensor is: what a reset with ``keep_pose`` keeps (the grid cell on a discrete task,
+        the commanded work-frame position on a continuous one). :meth:`place_sensor` puts it back."""
+        core = self._core
+        return {"cell": core.cell[0].tolist(), "position_mm": core.position_mm[0].tolist()}
+
+    def place_sensor(self, placement: dict) -> None:
+        """Put the sensor where :meth:`sensor_placement` found it (for the next ``keep_pose`` reset; the
+        observation is not tapped again): how a resumed training run restores the pose an episode kept."""
+        if not self._path_mm:
+            raise ValueError("place_sensor needs an earlier reset")
+        self._core.cell[0] = placement["cell"]
+        self._core.position_mm[0] = placement["position_mm"]
+
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Start an episode: a random goal key and a random start pose.
 
