@@ -28,7 +28,7 @@ run: $(STAMP)
 	$(TB) show --output $(OUT)/gallery.png
 	$(TB) show grid-alphabet --output $(OUT)/grid-alphabet.png
 	if [ -f $(DQN_RUN)/config.json ]; then $(TB) train --resume $(DQN_RUN); \
-	else $(TB) train DiscreteArrows-v0 dqn --epochs 6 --precision bf16 --test-episodes 10 --run-dir $(DQN_RUN); fi
+	else $(TB) train DiscreteArrows-v0 dqn --epochs 6 --test-episodes 10 --run-dir $(DQN_RUN); fi
 	$(TB) report $(DQN_RUN) --episodes 50
 
 # Two workers (one per core here); each test file runs whole in one worker, in its own order.

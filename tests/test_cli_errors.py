@@ -7,17 +7,22 @@ each run through ``tactile_braille.cli.main`` as the shell runs it.
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
 import torch
 
+from tactile_braille.agents import TrainConfig, train
 from tactile_braille.cli import main
 
 RECORD = str(Path(__file__).parents[1] / "results" / "tuning" / "DA_relabel-all_utd4_100")  # committed
 RESULTS = Path(__file__).parents[1] / "results" / "leaderboard"  # committed
 RESULT = str(RESULTS / "cleanrl" / "DiscreteArrows-v0__dqn_her__0.json")
 ELSEWHERE = str(RESULTS / "sb3" / ".." / "cleanrl" / "DiscreteArrows-v0__dqn_her__0.json")  # the same file
+ARROWS = "tactile_braille/DiscreteArrows-v0"
+RUNS = ("trained", "truncated", "torn", "no-config", "planner")
+"""The runs the ``runs`` fixture makes (its docstring says what each is)."""
 
 CASES = {
     "train --seed -1": (["train", "DiscreteArrows-v0", "--seed", "-1", "--run-dir", "{tmp}/run"],
@@ -54,6 +59,29 @@ CASES = {
     "leaderboard a results file twice": (["leaderboard", RESULT, RESULT], "are the same results file, given"),
     "leaderboard a file twice, spelt two ways": (["leaderboard", RESULT, ELSEWHERE],
                                                   "are the same results file, given"),
+    # {tmp}/NAME, NAME in RUNS: a run the runs fixture (below) made, copied in.
+    "evaluate a truncated checkpoint": (["evaluate", "{tmp}/truncated"], "checkpoint.pt is unreadable"),
+    "evaluate --world, a truncated checkpoint": (["evaluate", "{tmp}/truncated", "--world", "render"],
+                                                 "checkpoint.pt is unreadable"),
+    "evaluate a run, then a truncated one": (["evaluate", "{tmp}/trained", "{tmp}/truncated"],
+                                             "checkpoint.pt is unreadable"),
+    "report a truncated checkpoint": (["report", "{tmp}/truncated"], "checkpoint.pt is unreadable"),
+    "report a run, then a torn one": (["report", "{tmp}/trained", "{tmp}/torn", "--episodes", "1"],
+                                      "its last row is torn"),
+    "report a run, then one without config.json": (["report", "{tmp}/trained", "{tmp}/no-config"],
+                                                    "no-config is not a training run (no config.json)"),
+    "report --output, a run, then a torn one": (["report", "{tmp}/trained", "{tmp}/torn", "--output",
+                                                 "{tmp}/out"], "its last row is torn"),
+    "report --output, a run never evaluated": (["report", "{tmp}/trained", "--output", "{tmp}/out"],
+                                               "has no typing evaluation of its last epoch: run `tactile"),
+    "evaluate --env-steps abc": (["evaluate", "DiscreteArrows-v0", "--policy", "m:f", "--env-steps", "abc"],
+                                 "argument --env-steps: invalid non-negative integer: 'abc'"),
+    "report --episodes abc": (["report", "{tmp}/trained", "--episodes", "abc"],
+                              "argument --episodes: invalid positive integer: 'abc'"),
+    "classify --threads two": (["classify", "--threads", "two"], "invalid positive integer: 'two'"),
+    "train --init-from a run of another algorithm": (
+        ["train", "DiscreteArrows-v0", "dqn", "--init-from", "{tmp}/planner", "--run-dir", "{tmp}/warm"],
+        "learnt with other settings (algo: 'planner' -> 'dqn'; "),
 }  # fmt: skip
 if not torch.cuda.is_available():
     CASES["train --device cuda without CUDA"] = (
@@ -62,13 +90,49 @@ if not torch.cuda.is_available():
     )
 
 
+@pytest.fixture(scope="module")
+def runs(env_datasets, tmp_path_factory) -> Path:
+    """A folder of runs, as the cases name them: ``trained`` (a finished one-epoch DQN run, never
+    evaluated), ``truncated`` (its checkpoint cut to 100 bytes), ``torn`` (the last row of its log
+    cut), ``no-config`` (its config.json gone) and ``planner`` (the settings of a planner run)."""
+    folder = tmp_path_factory.mktemp("runs")
+    config = TrainConfig(
+        epochs=1, steps_per_epoch=30, start_steps=10, dataset=str(env_datasets[ARROWS]),
+        agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 1, "snapshots": 1},
+        replay={"capacity": 2000},
+    )  # fmt: skip
+    trained = train(config, run_dir=folder / "trained", progress=False)
+    for name in ("truncated", "torn", "no-config"):
+        shutil.copytree(trained, folder / name)
+    checkpoint = folder / "truncated" / "checkpoint.pt"
+    checkpoint.write_bytes(checkpoint.read_bytes()[:100])
+    log = folder / "torn" / "progress.csv"
+    log.write_text(log.read_text()[:-5])
+    (folder / "no-config" / "config.json").unlink()
+    (folder / "planner").mkdir()
+    (folder / "planner" / "config.json").write_text(json.dumps(TrainConfig(algo="planner").to_json()))
+    return folder
+
+
+def _files(folder: Path) -> dict[str, tuple[int, int]]:
+    """Every file and folder under ``folder``: its size and time of change (a file rewritten counts)."""
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*")}
+
+
 @pytest.mark.parametrize(("argv", "message"), CASES.values(), ids=CASES.keys())
-def test_a_user_error_is_one_line_exit_2_and_writes_nothing(argv, message, tmp_path, monkeypatch, capsys):
+def test_a_user_error_is_one_line_exit_2_and_writes_nothing(
+    argv, message, request, tmp_path, monkeypatch, capsys
+):
     monkeypatch.chdir(tmp_path)  # nothing may be written, but never into the repository
     monkeypatch.setenv("TACTILE_BRAILLE_DATA", str(tmp_path / "cache"))
     (tmp_path / "file").write_text("not a folder")
     (tmp_path / "rig.json").write_text(json.dumps({}))
-    before = sorted(p.name for p in tmp_path.iterdir())
+    named = {part.removeprefix("{tmp}/").split("/")[0] for part in argv if part.startswith("{tmp}/")}
+    if named & set(RUNS):
+        runs = request.getfixturevalue("runs")  # trained once, for the cases that name its runs
+        for name in named & set(RUNS):
+            shutil.copytree(runs / name, tmp_path / name)
+    before = _files(tmp_path)
     try:
         code = main([part.replace("{tmp}", str(tmp_path)) for part in argv])
     except SystemExit as exit_:  # argparse's own errors (a usage line, then the error)
@@ -76,7 +140,7 @@ def test_a_user_error_is_one_line_exit_2_and_writes_nothing(argv, message, tmp_p
     assert code == 2
     error = capsys.readouterr().err
     assert "Traceback" not in error and message in error.splitlines()[-1], error
-    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no run folder, dataset or .partial
+    assert _files(tmp_path) == before  # no run folder, dataset, .partial or file in a run read
 
 
 def test_keycaps_named_twice_are_written_and_reported_once(tmp_path, capsys):

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import shlex
 import sys
 import time
@@ -315,6 +317,8 @@ def _train(args: argparse.Namespace) -> int:
     config = _resume_config(args) if args.resume is not None else _train_config(args)
     from tactile_braille.agents.training import train
 
+    if args.resume is None:
+        _check_warm_start(config)
     rig = None
     if args.rig_config is not None or args.simulated_rig:
         rig, _ = _open_ur5(args.rig_config, simulated=args.simulated_rig)
@@ -326,6 +330,39 @@ def _train(args: argparse.Namespace) -> int:
             rig.close()
     print(f"run folder: {run}")
     return 0
+
+
+def _check_warm_start(config, shown: int = 3) -> None:
+    """Refuse a warm start (``--init-from RUN``) from another learner in one short line that leads with
+    the settings that differ: the task and algorithm first (another algorithm's hyperparameters all
+    differ, and go unlisted), at most ``shown`` of them. ``train`` checks the rest of the source."""
+    from tactile_braille.agents.config import differences
+    from tactile_braille.agents.run import CONFIG_FILE, INIT_FREE, read_config
+
+    source = Path(config.init_from) if config.init_from is not None else None
+    if source is None or not (source / CONFIG_FILE).exists():
+        return
+    free = tuple(name for name in INIT_FREE if not name.endswith("."))
+    groups = tuple(name for name in INIT_FREE if name.endswith("."))
+    other = [line for line in differences(read_config(source), config, ignore=free)
+             if not line.startswith(groups)]  # fmt: skip
+    if not other:
+        return
+    if any(line.startswith("algo:") for line in other):
+        other = [line for line in other if not line.startswith("agent.")]
+
+    def rank(line: str) -> tuple[bool, bool]:  # the task and algorithm, other top-level settings, groups
+        name = line.partition(":")[0]
+        return name not in ("algo", "task"), "." in name
+
+    other.sort(key=rank)
+    listed = "; ".join(line if len(line) <= 80 else line[:77] + "..." for line in other[:shown])
+    more = f"; and {len(other) - shown} more" if len(other) > shown else ""
+    raise ValueError(
+        f"--init-from {source} learnt with other settings ({listed}{more}): a warm start may change only "
+        "where and how long it learns (world, seed, length, replay, evaluation, machine); start from a run "
+        "of the same task, algorithm and hyperparameters"
+    )
 
 
 def _resume_config(args: argparse.Namespace):
@@ -345,13 +382,16 @@ def _resume_config(args: argparse.Namespace):
                 "the run's own settings (drop it, or start a new run)"
             )
     overrides = config_overrides(args, stored.algo)
+    if overrides.get("precision") == "auto":
+        del overrides["precision"]  # the run's own: it was chosen when the run began
     return replace_settings(stored, overrides) if overrides else None
 
 
 def _train_config(args: argparse.Namespace):
     """The run's settings: the preset's, with every option given on top (checked before anything runs)."""
+    from tactile_braille.agents.config import replace_settings
     from tactile_braille.agents.presets import preset_config
-    from tactile_braille.cli_config import config_overrides
+    from tactile_braille.cli_config import config_overrides, resolve_precision
 
     if args.task is None:
         raise ValueError("give a TASK (an environment id) or --resume RUN_DIR")
@@ -363,40 +403,61 @@ def _train_config(args: argparse.Namespace):
             f"--rig-config and --simulated-rig train on the rig: drop --backend {overrides['backend']}"
         )
     task = args.task if "/" in args.task else f"tactile_braille/{args.task}"
-    return preset_config(args.preset, task, args.algo, **overrides)
+    precision = overrides.pop("precision", "auto")  # chosen once the settings have passed their checks
+    config = preset_config(args.preset, task, args.algo, **overrides)
+    return replace_settings(config, {"precision": resolve_precision(precision, config.device)})
 
 
 def _report(args: argparse.Namespace) -> int:
-    from tactile_braille.agents.report import write_report
+    from tactile_braille.agents.report import check_run, write_report
 
-    records = [run for run in args.runs if not (run / "checkpoint.pt").exists()]
-    if records and args.output is None:
-        raise ValueError(
-            f"{records[0]} has no checkpoint to evaluate (an archived record, or a run before its first "
-            "epoch ended): table records with --output FILE.md"
-        )
+    # Every run is read, and a damaged one refused, before anything is written. Without --output each
+    # run gets its report in its own folder; with it, OUTPUT is the only place written to.
     for run in args.runs:
-        if run in records:
-            continue  # an archived record (no checkpoint): the report over runs reads it
+        if args.output is None and (run / "config.json").exists() and not (run / "checkpoint.pt").exists():
+            raise ValueError(
+                f"{run} has no checkpoint to evaluate (an archived record, or a run before its first "
+                "epoch ended): table records with --output FILE.md"
+            )
+        check_run(run, checkpoint=args.output is None)
+    if args.output is not None:
+        return _report_over_runs(args)
+    for run in args.runs:
         report = write_report(run, episodes=args.episodes)
         print(report.read_text())
         print(f"wrote {report} and {report.parent / 'curve.png'}")
-    if args.output is not None:
-        from tactile_braille.evaluation.report import write_report as write_results
+    return 0
 
-        notes = args.notes.read_text() if args.notes is not None else None
-        command = "tactile-braille " + _short_command(args.argv) if args.argv else None
-        results = write_results(
-            args.runs,
-            args.output,
-            title=args.title,
-            notes=notes,
-            command=command,
-            transfer_dirs=args.transfer,
-            warm_dirs=args.warm_start,
+
+def _report_over_runs(args: argparse.Namespace) -> int:
+    """``report RUN_DIR... --output OUTPUT``: the report over the runs, written under OUTPUT only."""
+    from tactile_braille.agents.report import check_run
+    from tactile_braille.evaluation.report import unevaluated
+    from tactile_braille.evaluation.report import write_report as write_results
+
+    for run in (*args.transfer, *args.warm_start):
+        check_run(run, checkpoint=False)
+    missing = unevaluated(args.runs)
+    if missing:
+        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+        raise ValueError(
+            f"{missing[0]}{more} has no typing evaluation of its last epoch: run `tactile-braille evaluate "
+            "RUN_DIR...` first (it writes typing.json and result.json in each run's folder)"
         )
-        print(results.read_text().split("![training curves]")[0])
-        print(f"wrote {results} and its figures")
+    notes = args.notes.read_text() if args.notes is not None else None
+    command = "tactile-braille " + _short_command(args.argv) if args.argv else None
+    results = write_results(
+        args.runs,
+        args.output,
+        title=args.title,
+        notes=notes,
+        command=command,
+        transfer_dirs=args.transfer,
+        warm_dirs=args.warm_start,
+        evaluate_missing=False,
+    )
+    print(results.read_text().split("![training curves]")[0])
+    print(f"wrote {results} and its figures")
     return 0
 
 
@@ -411,11 +472,16 @@ def _evaluate(args: argparse.Namespace) -> int:
             raise ValueError(
                 f"--{flag.replace('_', '-')} is for --policy; a run's results file takes its own"
             )
-    for run in args.targets:
+    from tactile_braille.agents.report import read_checkpoint
+    from tactile_braille.agents.run import read_config
+
+    for run in args.targets:  # every run is read before any is evaluated (and written to)
         if not (run / "config.json").exists():
             raise ValueError(
                 f"{run} is not a training run (no config.json); to score a callable, use --policy"
             )
+        read_config(run)
+        read_checkpoint(run, mmap=True)  # a missing or damaged one: the message a resume gives
     if args.world:
         return _evaluate_transfer(args)
     for run in args.targets:
@@ -461,12 +527,13 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
         raise ValueError(f"--output {args.output} is a folder; name the results file (e.g. result.json)")
     if args.output.exists() and not args.overwrite:
         raise FileExistsError(f"{args.output} exists; choose another name or pass --overwrite")
-    policy = load_policy(args.policy)
-    report = evaluate_policy(
-        policy, str(args.targets[0]), protocol=args.protocol or "paper", backend=args.backend or "dataset",
-        seed=args.seed,
-        track=args.track or "tactile", dataset=args.dataset, sentences=not args.no_sentences,
-    )  # fmt: skip
+    with _importable_from_cwd():  # the policy's module, and what it imports as it runs
+        policy = load_policy(args.policy)
+        report = evaluate_policy(
+            policy, str(args.targets[0]), protocol=args.protocol or "paper",
+            backend=args.backend or "dataset", seed=args.seed,
+            track=args.track or "tactile", dataset=args.dataset, sentences=not args.no_sentences,
+        )  # fmt: skip
     result = make_result(report, method=args.method, seed=args.train_seed, env_steps=args.env_steps,
                          epochs=args.epochs)  # fmt: skip
     path = write_result(result, args.output, overwrite=args.overwrite)
@@ -475,6 +542,21 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
           f"fingerprint {report.fingerprint[:12]}")  # fmt: skip
     print(f"wrote {path}")
     return 0
+
+
+@contextlib.contextmanager
+def _importable_from_cwd():
+    """Modules in the current folder import within the block, as they do under ``python -m`` (the
+    ``tactile-braille`` script's own folder is first on ``sys.path`` instead)."""
+    cwd = os.getcwd()
+    added = cwd not in sys.path
+    if added:
+        sys.path.insert(0, cwd)
+    try:
+        yield
+    finally:
+        if added and cwd in sys.path:
+            sys.path.remove(cwd)
 
 
 def _leaderboard(args: argparse.Namespace) -> int:
@@ -667,7 +749,9 @@ def _add_classify_command(commands) -> None:
     classify.add_argument("--epochs", type=int, default=60, help="maximum epochs (early stopping)")
     classify.add_argument("--seed", type=_non_negative, default=0)
     classify.add_argument("--sensor", default="braille_331", choices=sorted(SENSORS))
-    classify.add_argument("--threads", type=_positive, default=2, help="torch CPU threads")
+    classify.add_argument(
+        "--threads", type=_positive, default=1, help="torch CPU threads (default 1: one per process)"
+    )
     classify.add_argument("--overwrite", action="store_true", help="replace an existing --output folder")
     classify.set_defaults(handler=_classify)
 
@@ -704,7 +788,11 @@ def _add_train_command(commands) -> None:
 
 def _add_report_command(commands) -> None:
     """The ``report`` command."""
-    report = commands.add_parser("report", help="reports of training runs (and over runs and seeds)")
+    report = commands.add_parser(
+        "report", help="reports of training runs (and over runs and seeds)",
+        description="Writes each run's report.md and curve.png in its folder; with --output, only the "
+        "report over the runs, under OUTPUT. Every run is checked before anything is written.",
+    )  # fmt: skip
     report.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
     report.add_argument(
         "--transfer",
@@ -718,13 +806,17 @@ def _add_report_command(commands) -> None:
         "--warm-start", nargs="+", type=Path, default=(), metavar="RUN_DIR",
         help="--output: warm-started runs (train --init-from) and their sources: a section of their own",
     )  # fmt: skip
-    report.add_argument("--episodes", type=_positive, default=100, help="final test episodes (default 100)")
+    report.add_argument(
+        "--episodes", type=_positive, default=100, help="each run's final test episodes (default 100)"
+    )
     report.add_argument(
         "--output",
         type=Path,
         default=None,
-        help="also write a report over all runs (Table III, curves, typing, Figure 4): OUTPUT/results.md, "
-        "or OUTPUT itself if it ends in .md (its figures then go in a folder of the same name)",
+        help="write the report over all runs instead (Table III, curves, typing, Figure 4), and nothing "
+        "in the runs' folders: OUTPUT/results.md, or OUTPUT itself if it ends in .md (its figures then "
+        "go in a folder of the same name); a run with a checkpoint needs the typing evaluation of its "
+        "last epoch first (tactile-braille evaluate RUN_DIR)",
     )
     report.add_argument("--title", default="Results", help="title of results.md")
     report.add_argument("--notes", type=Path, default=None, help="Markdown file placed after the table")
@@ -740,10 +832,16 @@ def _add_evaluate_command(commands) -> None:
     )  # fmt: skip
     evaluate.add_argument("targets", nargs="+", type=Path, metavar="RUN_DIR|TASK")
     evaluate.add_argument(
-        "--policy", metavar="MODULE:NAME", help="a callable to score: module or file.py, name"
+        "--policy",
+        metavar="MODULE:NAME",
+        help="a callable to score: a module (importable, or in the current folder) or file.py, and a name",
     )
-    evaluate.add_argument("--method", help="--policy: the method's name on the leaderboard (free text)")
-    evaluate.add_argument("--output", type=Path, help="--policy: the results file to write (JSON)")
+    evaluate.add_argument(
+        "--method", help="required with --policy: the method's name on the leaderboard (free text)"
+    )
+    evaluate.add_argument(
+        "--output", type=Path, help="required with --policy: the results file to write (JSON)"
+    )
     evaluate.add_argument("--overwrite", action="store_true", help="--policy: replace an existing --output")
     evaluate.add_argument(
         "--track",
@@ -803,15 +901,23 @@ def _add_evaluate_command(commands) -> None:
     board.set_defaults(handler=_leaderboard)
 
 
+def _integer(text: str, kind: str) -> int:
+    """``text`` as an integer, or argparse's error naming the kind of integer the option takes."""
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid {kind} integer: {text!r}") from None
+
+
 def _non_negative(text: str) -> int:
-    value = int(text)
+    value = _integer(text, "non-negative")
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be a non-negative integer, got {value}")
     return value
 
 
 def _positive(text: str) -> int:
-    value = int(text)
+    value = _integer(text, "positive")
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
     return value

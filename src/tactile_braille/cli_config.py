@@ -31,6 +31,13 @@ RECORD_ONLY = ("preset",)
 """Settings a command-line user does not set (``--preset`` chooses the preset and records it)."""
 ALIASES = {"evaluation.test_episodes": ("--test-episodes",)}
 """Older option names kept working (``--no-her`` is :data:`ALIASES`' boolean twin, below)."""
+AUTO = {
+    "precision": "Or auto, the default of a new run: bf16 where the device computes bfloat16 natively (a "
+    "CPU with AVX512-BF16 or AMX, a CUDA device that supports it), else fp32; resolved on this machine "
+    "before the run's settings are recorded (config.json holds fp32 or bf16; a resume keeps its own).",
+}
+"""Settings whose option also takes ``auto`` (and its help): chosen on this machine by
+:func:`resolve_precision`."""
 
 
 def field_docs(cls: type) -> dict[str, str]:
@@ -89,7 +96,8 @@ def _add_option(group, name: str, hint: Any, doc: str) -> None:
     if base is bool:
         options["action"] = argparse.BooleanOptionalAction
     elif origin is Literal:
-        options["choices"] = typing.get_args(base)
+        options["choices"] = typing.get_args(base) + (("auto",) if name in AUTO else ())
+        options["help"] += f" {AUTO[name]}" if name in AUTO else ""
     elif origin is tuple:
         options.update(nargs="+", type=typing.get_args(base)[0], metavar=name.split(".")[-1].upper())
     elif base in (int, float, str):
@@ -129,6 +137,18 @@ def config_overrides(args: argparse.Namespace, algo: str) -> dict[str, Any]:
         else:
             changes[name] = value
     return changes
+
+
+def resolve_precision(precision: str, device: str) -> str:
+    """``precision`` as a run records it: ``auto`` is bf16 where ``device`` (a CPU or CUDA device)
+    computes bfloat16 natively (:func:`~tactile_braille.agents.common.native_bf16`), else fp32; fp32
+    and bf16 stay."""
+    if precision != "auto":
+        return precision
+    from tactile_braille.agents.common import native_bf16  # torch: only once the settings are checked
+
+    known = device.partition(":")[0] in ("cpu", "cuda")  # elsewhere native_bf16 cannot tell
+    return "bf16" if known and native_bf16(device) else "fp32"
 
 
 def _field_names(algo: str) -> set[str]:

@@ -355,7 +355,8 @@ def patched(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGKILL)
     return result
 setattr(owner, {where.split(".")[1]!r}, patched)
-training.train(TrainConfig.from_json(json.loads({json.dumps(config.to_json())!r})), run_dir={str(run)!r}, progress=False)
+config = TrainConfig.from_json(json.loads({json.dumps(config.to_json())!r}))
+training.train(config, run_dir={str(run)!r}, progress=False)
 """
     child = subprocess.run([sys.executable, "-c", script], capture_output=True, timeout=300)
     assert child.returncode == -signal.SIGKILL, child.stderr.decode()[-2000:]

@@ -504,6 +504,9 @@ def press(observation):
 def floats(observation):
     return 0.5
 
+def nothing(observation):
+    return None
+
 count = 3
 """
 
@@ -528,6 +531,7 @@ def test_cli_scores_a_callable_and_ranks_it(env_datasets, tmp_path, capsys):
     ("policy", "target", "message"),
     [
         ("{module}:floats", "DiscreteArrows-v0", "takes one integer"),
+        ("{module}:nothing", "DiscreteArrows-v0", "returned None for DiscreteArrows-v0, not an action"),
         ("{module}:count", "DiscreteArrows-v0", "is a int, not a callable"),
         ("{module}:missing", "DiscreteArrows-v0", "has no 'missing'"),
         ("{module}", "DiscreteArrows-v0", "a policy is MODULE:NAME"),

@@ -667,8 +667,10 @@ class TrainConfig:
         dataset: dataset for the dataset backend: a path, or a default dataset's name
             (``grid-alphabet-6mm``...; default: the task's, cached).
         device: torch device (``cpu``, ``cuda``, ``cuda:1``...).
-        precision: ``fp32`` or ``bf16`` (autocast in the updates).
-        threads: torch CPU threads.
+        precision: ``fp32`` or ``bf16`` (autocast in the updates; faster only where the device
+            computes bfloat16 natively, several times slower where it is emulated).
+        threads: torch CPU threads (default 1, so that runs side by side do not oversubscribe the
+            cores; a run alone on an idle machine may take one per core).
         checkpoint_every: epochs between checkpoints.
         init_from: a warm start: the run folder whose last checkpoint's agent (networks, optimisers,
             temperature, touch encoder) this run starts from, not its replay, counters or generators
@@ -705,7 +707,7 @@ class TrainConfig:
     dataset: str | None = None
     device: str = "cpu"
     precision: Precision = "fp32"
-    threads: int = 2
+    threads: int = 1
     checkpoint_every: int = 1
     init_from: str | None = None
     track: Track = "tactile"

@@ -247,7 +247,7 @@ def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -
     path = run_dir / CHECKPOINT_FILE
     if not path.exists():
         return Counters()
-    state = _read_checkpoint(path, agent.device)
+    state = read_checkpoint_file(path, agent.device)
     try:
         counters = Counters(int(state["epoch"]) + 1, int(state["env_steps"]), int(state["updates"]),
                             state.get("episode"), dict(state.get("losses", {})))  # fmt: skip
@@ -268,7 +268,7 @@ def restore_checkpoint(run_dir: Path, agent, buffer, rng: np.random.Generator) -
     return counters
 
 
-def _read_checkpoint(path: Path, device, mmap: bool = False) -> dict:
+def read_checkpoint_file(path: Path, device, mmap: bool = False) -> dict:
     """A checkpoint's contents, or a ValueError naming it where it is unreadable."""
     try:
         state = torch.load(path, weights_only=False, map_location=device, mmap=mmap)
@@ -467,7 +467,7 @@ def _checkpoint_covers(run_dir: Path) -> tuple[int, str | None]:
     path = run_dir / CHECKPOINT_FILE
     if not path.exists():
         return 0, None
-    state = _read_checkpoint(path, "cpu", mmap=True)  # mapped, not read: the networks are not needed
+    state = read_checkpoint_file(path, "cpu", mmap=True)  # mapped, not read: the networks are not needed
     return int(state.get("progress_rows", int(state["epoch"]) + 1)), state.get("progress_sha256")
 
 

@@ -1,8 +1,9 @@
 """Reports over runs and seeds: the paper's Table III with confidence intervals, curves, trajectories.
 
 ``tactile-braille report RUN_DIR... --output DIR`` groups runs by (task,
-algorithm), evaluates each (typing, if not done yet) and writes
-``DIR/results.md``: a table in the shape of the paper's Table III, the
+algorithm), reads each one's typing evaluation (:func:`write_report` runs it
+where missing; the command, which writes only under ``DIR``, refuses such
+runs instead) and writes ``DIR/results.md``: a table in the shape of the paper's Table III, the
 paper's numbers alongside, with the mean over seeds, its 95 % bootstrap
 confidence interval and the interquartile mean (IQM, the mean of the middle
 half, as rliable recommends for few seeds); training curves with the seed
@@ -174,6 +175,26 @@ def _read_json(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.exists() else None
 
 
+def _current_typing(run_dir: Path, rows: list[dict[str, float]]) -> dict | None:
+    """The run's typing evaluation (``typing.json``), or None where it has none of its last epoch."""
+    typing_file = run_dir / "typing.json"
+    typing = json.loads(typing_file.read_text()) if typing_file.exists() else None
+    last_epoch = int(rows[-1]["epoch"]) if rows else -1
+    if typing is not None and typing.get("checkpoint_epoch") != last_epoch:
+        return None  # evaluated before the run went on: stale
+    return typing
+
+
+def unevaluated(run_dirs) -> list[Path]:
+    """The runs with a checkpoint but no typing evaluation of their last epoch: those that
+    :func:`load_records` evaluates, writing ``typing.json`` and ``result.json`` into their folders."""
+    return [
+        run_dir
+        for run_dir in map(Path, run_dirs)
+        if (run_dir / "checkpoint.pt").exists() and _current_typing(run_dir, read_progress(run_dir)) is None
+    ]
+
+
 def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
     """Read runs (and their typing evaluations, running them where missing)."""
     from tactile_braille.evaluation.runs import evaluate_typing
@@ -184,11 +205,8 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
             raise FileNotFoundError(f"{run_dir} is not a training run (no config.json)")
         config = read_config(run_dir)
         rows = read_progress(run_dir)
-        typing_file = run_dir / "typing.json"
-        typing = json.loads(typing_file.read_text()) if typing_file.exists() else None
+        typing = _current_typing(run_dir, rows)
         last_epoch = int(rows[-1]["epoch"]) if rows else -1
-        if typing is not None and typing.get("checkpoint_epoch") != last_epoch:
-            typing = None  # evaluated before the run went on: stale
         if typing is not None and "released_protocol" not in typing and evaluate_missing \
                 and (run_dir / "checkpoint.pt").exists():  # fmt: skip
             typing = None  # evaluated before the released protocol was: evaluate again
@@ -851,6 +869,7 @@ def write_report(
     command: str | None = None,
     transfer_dirs=(),
     warm_dirs=(),
+    evaluate_missing: bool = True,
 ) -> Path:
     """Evaluate the runs and write the report with its figures; returns its path.
 
@@ -867,13 +886,16 @@ def write_report(
             is tabled in a section of its own; their other figures are not.
         warm_dirs: warm-started runs (``init.json``) and their sources, tabled in a section of their
             own beside ``run_dirs``' runs of the same settings from scratch.
+        evaluate_missing: run the typing evaluation of the runs that lack one of their last epoch
+            (it writes ``typing.json`` and ``result.json`` into their folders); False: report them
+            without typing (:func:`unevaluated` names them).
     """
     output = Path(output)
     if output.suffix == ".md":
         report, figures, link = output, output.with_suffix(""), output.with_suffix("").name + "/"
     else:
         report, figures, link = output / "results.md", output, ""
-    groups = group(load_records(run_dirs))
+    groups = group(load_records(run_dirs, evaluate_missing=evaluate_missing))
     if not groups:
         raise ValueError("no runs to report")
     previous = linked_figures(report, link)

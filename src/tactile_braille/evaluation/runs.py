@@ -53,13 +53,12 @@ def run_method(config) -> str:
 def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
     """The typing evaluation of a run's last checkpoint (the module docstring); returns typing.json's
     content. For the alphabet tasks, ``sentences`` adds the typing of the sentences."""
-    import torch
 
-    from tactile_braille.agents.report import load_run
+    from tactile_braille.agents.report import load_run, read_checkpoint
 
     run_dir = Path(run_dir)
     config, env, agent = load_run(run_dir)
-    state = torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")
+    state = read_checkpoint(run_dir)
     epoch, env_steps = int(state["epoch"]), int(state["env_steps"])  # what the scored policy trained
     limit = config.max_episode_steps  # the run's own (None: the task's registered one)
     report = evaluate_policy(agent, config.task, env=env, track=config.track, seed=seed, sentences=sentences,
@@ -88,9 +87,8 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
 def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
     """The typing evaluation of a run's last checkpoint in other worlds (:mod:`.worlds`); returns
     ``RUN_DIR/transfer.json``'s content, which keeps the other worlds' entries of the same checkpoint."""
-    import torch
 
-    from tactile_braille.agents.report import load_run
+    from tactile_braille.agents.report import load_run, read_checkpoint
     from tactile_braille.evaluation.worlds import expand_worlds
 
     run_dir = Path(run_dir)
@@ -100,7 +98,7 @@ def evaluate_transfer(run_dir, worlds: list[str], seed: int = 0) -> dict:
         raise ValueError(f"{run_dir} trained on {config.task}, which has no keyboard to transfer to")
     if not (run_dir / "checkpoint.pt").exists():
         raise FileNotFoundError(f"{run_dir} has no checkpoint yet: nothing to type with")
-    state = torch.load(run_dir / "checkpoint.pt", weights_only=False, map_location="cpu")
+    state = read_checkpoint(run_dir)
     epoch = int(state["epoch"])
     path = run_dir / TRANSFER_FILE
     output = json.loads(path.read_text()) if path.exists() else {}

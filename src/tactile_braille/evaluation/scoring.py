@@ -74,6 +74,15 @@ class CheckedPolicy:
             raise PolicyError(
                 f"the policy returned {action!r} for {self.task}: not an array ({error})"
             ) from None
+        if value.dtype.kind in "OSUV":  # None, a string, a dict...: no numbers
+            returned = "None" if action is None else f"a {type(action).__name__}"
+            takes = (
+                "one integer" if isinstance(space, gym.spaces.Discrete) else f"floats of shape {space.shape}"
+            )
+            raise PolicyError(
+                f"the policy returned {returned} for {self.task}, not an action: its action space {space} "
+                f"takes {takes}"
+            )
         if isinstance(space, gym.spaces.Discrete):
             if value.size != 1 or value.dtype.kind not in "iu":
                 raise PolicyError(
