@@ -533,6 +533,7 @@ def _evaluate_policy(args: argparse.Namespace) -> int:
             policy, str(args.targets[0]), protocol=args.protocol or "paper",
             backend=args.backend or "dataset", seed=args.seed,
             track=args.track or "tactile", dataset=args.dataset, sentences=not args.no_sentences,
+            progress=sys.stderr.isatty(),  # a bar for a person watching, none in logs
         )  # fmt: skip
     result = make_result(report, method=args.method, seed=args.train_seed, env_steps=args.env_steps,
                          epochs=args.epochs)  # fmt: skip

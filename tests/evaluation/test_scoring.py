@@ -162,6 +162,13 @@ def test_a_longer_time_limit_is_cut_to_the_protocols_and_a_shorter_one_refused(a
         evaluate_policy(never_press, ARROWS, env=arrows, max_episode_steps=0)
 
 
+def test_a_long_evaluation_shows_its_progress(arrows, capsys):
+    evaluate_policy(press, ARROWS, env=arrows, progress=True)
+    assert "typing paper" in capsys.readouterr().err
+    evaluate_policy(press, ARROWS, env=arrows)
+    assert capsys.readouterr().err == ""
+
+
 def test_arguments_of_the_wrong_kind_are_refused_before_anything_is_made(arrows, env_datasets, tmp_path):
     missing = tmp_path / "no-such-dataset.h5"  # made first, the environment would fail on it instead
     with pytest.raises(TypeError, match="a policy must be callable"):

@@ -121,13 +121,19 @@ PROTOCOLS = ("paper", "released")
 
 
 def type_sequences(
-    agent, env: gym.Env, sequences: list[tuple[str, ...]], seed: int = 0, protocol: str = "paper"
+    agent,
+    env: gym.Env,
+    sequences: list[tuple[str, ...]],
+    seed: int = 0,
+    protocol: str = "paper",
+    progress: bool = False,
 ) -> TypingResult:
     """Type each sequence with the agent's test-time actions (see the module docstring).
 
     ``env`` is a braille environment made with ``gym.make`` (its time limit
     cuts each key's attempt). ``protocol``: ``"paper"`` keeps the sensor where
     each press left it; ``"released"`` starts every key from a random pose.
+    ``progress``: a progress bar of the sequences typed (on stderr).
     """
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
@@ -138,7 +144,12 @@ def type_sequences(
             raise ValueError(f"keys {sorted(unknown)} are not among the task's keys {keys}")
     rng = np.random.default_rng(seed)
     result = TypingResult(keys=keys, sequences=[tuple(s) for s in sequences])
-    for number, sequence in enumerate(result.sequences):
+    numbered = enumerate(result.sequences)
+    if progress:
+        from tqdm.auto import tqdm
+
+        numbered = tqdm(numbered, total=len(sequences), desc=f"typing {protocol}", unit="sequence")
+    for number, sequence in numbered:
         typed, steps = [], []
         for position, goal in enumerate(sequence):
             episode = run_episode(

@@ -280,6 +280,7 @@ def evaluate_policy(
     max_episode_steps: int | None = None,
     sentences: bool = True,
     env: gym.Env | None = None,
+    progress: bool = False,
 ) -> TypingReport:
     """Type the paper's sequences for ``task`` with ``policy`` and score them (the module docstring).
 
@@ -293,7 +294,7 @@ def evaluate_policy(
     ``max_episode_steps``, or else the task's registered one (25 steps), whatever time limit
     ``env`` has (a longer one, or none, is cut to it; a shorter one is refused). Tasks whose keys
     type text (the alphabet's: their key set's ``types_sentences``) also type :data:`SENTENCES`
-    unless ``sentences`` is false.
+    unless ``sentences`` is false. ``progress``: a progress bar of the sequences typed (on stderr).
 
     Raises:
         TypeError: ``policy`` is not callable, ``task`` not a task's name or ``env`` not one
@@ -322,7 +323,7 @@ def evaluate_policy(
     sequences = paper_sequences(keys)
     grid = env.unwrapped.task.grid  # the key grid the policy types on (the discrete tasks')
     bound = _bound(env, sequences, protocol, seed)
-    result = type_sequences(agent, env, sequences, seed=seed, protocol=protocol)
+    result = type_sequences(agent, env, sequences, seed=seed, protocol=protocol, progress=progress)
     conditions = protocol_conditions(task_id, protocol, sequences, limit, seed, env.unwrapped.world)
     report = TypingReport(
         task=task_name(task_id), protocol=protocol, track=track, accuracy=result.accuracy,
