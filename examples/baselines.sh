@@ -36,3 +36,14 @@ run ContinuousArrows-v0 sac 4000 0
 run ContinuousArrows-v0 td3 4000 0
 run ContinuousAlphabet-v0 sac 4000 0
 run ContinuousAlphabet-v0 td3 4000 0
+
+# Tuned by the benchmark's protocol (docs/benchmark.md, "The tuning protocol"): an Optuna search on tuning
+# seed 100 at the task's official budget (its journal under runs/tune: a stopped search goes on; two
+# processes may share it), then the best settings on fresh seeds 0-4.
+tuned() {  # TASK ALGO TRIALS
+    [[ -z $FILTER || "$1 $2" == *$FILTER* ]] || return 0
+    "$PY" -m tactile_braille.baselines.sb3 tune "$1" "$2" --trials "$3" --study runs/tune
+    "$PY" -m tactile_braille.baselines.sb3 run "$1" "$2" --study runs/tune --seeds 0 1 2 3 4 --into "$OUT/sb3-tuned"
+}
+tuned DiscreteArrows-v0 dqn 16
+tuned DiscreteAlphabet-v0 dqn 12

@@ -379,3 +379,23 @@ def test_a_run_killed_anywhere_and_resumed_logs_the_uninterrupted_runs_rows(env_
         _kill_at(run, config, where, AT[name])
         train(run_dir=run, resume=True, progress=False)
         assert _rows_but_time(run) == expected, name
+
+
+def test_a_resume_on_other_samples_of_the_same_dataset_parameters_is_refused(finished_run, tmp_path, capsys):
+    """The run's world record holds its dataset's samples digest: a dataset of the same parameters whose
+    frames differ (here mirrored, its digest made anew) is another world."""
+    import h5py
+
+    from tactile_braille.datasets.store import samples_digest
+
+    assert "samples_sha256" in json.loads((finished_run / "world.json").read_text())
+    other = tmp_path / "mirrored.h5"
+    shutil.copyfile(read_config(finished_run).dataset, other)
+    with h5py.File(other, "r+") as handle:
+        frames = handle["observations"][()][:, :, ::-1]
+        del handle["observations"]
+        handle.create_dataset("observations", data=frames)
+        names = ("observations", "poses", "labels", "pressed", "tap_index")
+        handle.attrs["samples_sha256"] = samples_digest({name: handle[name][()] for name in names})
+    assert main(resume(finished_run, "--dataset", str(other), "--epochs", "2")) == 2
+    assert "was trained in another world than this one (samples_sha256:" in one_line_error(capsys)

@@ -15,14 +15,12 @@ from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
     _reached_cell,
-    bootstrap_ci,
     compared_groups,
     coverage_section,
     coverage_table,
     departures,
     grid_label,
     group,
-    iqm,
     load_records,
     original_curves,
     plot_by_task,
@@ -32,25 +30,6 @@ from tactile_braille.evaluation.report import (
     warm_start_table,
     write_report,
 )
-
-
-def test_bootstrap_ci_brackets_the_mean_and_shrinks_with_more_data():
-    rng = np.random.default_rng(0)
-    small, large = rng.normal(1.0, 1.0, 10), rng.normal(1.0, 1.0, 1000)
-    low, high = bootstrap_ci(small)
-    assert low < small.mean() < high
-    low_large, high_large = bootstrap_ci(large)
-    assert high_large - low_large < (high - low) / 5  # width ~ 1/sqrt(n)
-    assert low_large < 1.0 < high_large
-    assert bootstrap_ci([2.0, 2.0, 2.0]) == (2.0, 2.0)
-    assert all(np.isnan(bootstrap_ci([])))
-    assert bootstrap_ci([1.0, None, 3.0]) != (np.nan, np.nan)  # None (not reached) is skipped
-
-
-def test_iqm_trims_a_quarter_at_each_end():
-    assert iqm([1, 2, 3, 4, 5, 6, 7, 100]) == pytest.approx(np.mean([3, 4, 5, 6]))
-    assert iqm([1.0, 2.0, 3.0]) == 2.0  # fewer than 4 values: nothing to trim
-    assert np.isnan(iqm([]))
 
 
 def record(task, algo, seed, returns, accuracy=None, steps=None, reset=None):

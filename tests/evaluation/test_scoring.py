@@ -327,6 +327,24 @@ def _more_steps(result):
     return _set("report.total_steps", steps, "report.steps_per_key", steps / report["keys_asked"])(result)
 
 
+def _without(name: str):
+    """An edit that removes a field and its digest from the seal (``report.touch_optimum``)."""
+
+    def edit(result):
+        parent, _, field = name.rpartition(".")
+        (result[parent] if parent else result).pop(field)
+        result["seal"].pop(name)
+        return result
+
+    return edit
+
+
+def _no_sequences(result):
+    conditions = {**result["report"]["conditions"], "sequences": []}
+    digest = scoring.fingerprint(conditions)
+    return _set("report.conditions", conditions, "report.fingerprint", digest, "fingerprint", digest)(result)
+
+
 EDITS = {
     "accuracy raised, plausibly": (_set("report.accuracy", 0.99),
                                    r"accuracy \(0\.99\) contradicts its confusion matrix \(\d+ of 96"),
@@ -343,6 +361,9 @@ EDITS = {
     "budget cut": (_set("budget.env_steps", 10), r"\['budget'\] were changed"),
     "field added": (_set("report.note", "x"), r"\['report\.note'\] were added"),
     "seal removed": (lambda r: {k: v for k, v in r.items() if k != "seal"}, r"lacks \['seal'\]"),
+    "field removed with its seal": (_without("method"), r"lacks \['method'\]"),
+    "report field removed, sealed": (_without("report.touch_optimum"), r"report lacks \[.touch_optimum.\]"),
+    "no sequences, fingerprinted anew": (_no_sequences, r"sequences must be a non-empty list"),
     "unsealed format": (_set("format", "tactile_braille.result/1"), r"written before results files were"),
 }  # fmt: skip
 
@@ -455,6 +476,38 @@ def test_the_reference_is_the_registered_conditions_however_many_results_hold_ot
     # Where no result holds the registered conditions: the most held of the others, the lowest on a tie.
     fallback = min(r["fingerprint"] for r in others)
     assert f"Reference conditions `{fallback[:12]}`" in leaderboard_markdown(results)
+
+
+def test_the_leaderboard_ranks_within_the_official_budget_and_lists_the_rest_apart(arrows):
+    """DiscreteArrows' budget is 6,250 environment steps: a method trained longer (or of no stated
+    budget) is listed apart, never ranked above the methods that kept to it."""
+    oracle = evaluate_policy(lambda o: oracle_action(arrows), ARROWS, env=arrows)
+    long = make_result(oracle, method="pose oracle, trained long", seed=0, env_steps=6_251)
+    unstated = make_result(oracle, method="pose oracle, budget unstated", seed=0)
+    page = leaderboard_markdown([("a.json", long), ("b.json", unstated), ("c.json", _result(arrows, seed=0))])
+    ranked, over = page.split("### Over the official budget")
+    assert "6,250 environment steps (25 epochs of 250)" in ranked
+    assert "| 1 | press at once | tactile | 1 |" in ranked and "oracle" not in ranked
+    assert "| pose oracle, trained long | tactile | 1 | 1.000 |" in over and "budget unstated" in over
+
+
+def test_a_searched_method_states_its_trials_and_the_page_compares_the_best(arrows):
+    from tactile_braille.baselines.sb3 import _with_tuning
+
+    oracle = evaluate_policy(lambda o: oracle_action(arrows), ARROWS, env=arrows)
+    ours = [(f"o{seed}.json", make_result(oracle, method="tactile_braille oracle", seed=seed, env_steps=0))
+            for seed in range(3)]  # fmt: skip
+    tuned = [(f"t{seed}.json", _with_tuning(_result(arrows, method="SB3 press", seed=seed), {"trials": 12}))
+             for seed in range(3)]  # fmt: skip
+    page = leaderboard_markdown([*ours, *tuned])
+    assert (
+        "| 2 | SB3 press | tactile | 3 | 0.177 [0.177, 0.177] | 768 [768, 768] | 237 | 0 | 12 trials |"
+        in page
+    )
+    assert (
+        "probability of improvement, ours (`tactile`) over the best other method: 1.00 [1.00, 1.00]" in page
+    )
+    assert read_result(write_result(tuned[0][1], Path(__import__("tempfile").mkdtemp()) / "t.json"))["tuning"]
 
 
 def test_the_headline_table_takes_the_best_of_the_paper_ours_per_track_and_the_others(arrows, tmp_path):

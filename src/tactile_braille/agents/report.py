@@ -80,13 +80,15 @@ def _epoch_cell(epoch: int | None) -> str:
 
 
 def convergence_cell(returns: list[float]) -> str:
-    """The report's convergence epoch under the paper's rule, for a run that converged: one whose test
-    return reached :data:`CONVERGED`. Else ``not reached``, with the best return: 95 % of a low best
-    is reached early (a curve flat at 0.90 would "converge" at epoch 1)."""
+    """The report's convergence epoch under the paper's rule (the first epoch at 95 % of the run's best
+    test return), and for a run whose test return never reached :data:`CONVERGED` the best it reached:
+    95 % of a low best is reached early (a curve flat at 0.90 "converges" at once), and the
+    paper's epochs are of runs that reached it."""
+    epoch = _epoch_cell(convergence_epoch(returns))
     if convergence_epoch(returns, level=CONVERGED) is not None:
-        return _epoch_cell(convergence_epoch(returns))
+        return epoch
     best = np.nanmax(returns) if not np.all(np.isnan(returns)) else float("nan")
-    return f"not reached (best test return {best:.2f}, under {CONVERGED})"
+    return f"{epoch} (of a best test return of {best:.2f}: {CONVERGED} never reached)"
 
 
 def load_run(run_dir: str | Path, env=None, **env_options):

@@ -164,21 +164,27 @@ def setting_differences(run_dir: str | Path, config: TrainConfig) -> list[str]:
 def record_world(run_dir: Path, env, resume: bool) -> None:
     """Write the run's world, or check that a resumed run continues in the world it started in.
 
-    A run from before worlds were recorded is resumed without a record: what
-    it started in is unknown, and recording the present world would claim it.
+    The record is the environment's :attr:`~tactile_braille.envs.braille_env.BrailleEnv.world` with,
+    on the dataset backend, the dataset's samples digest always (the world names a reference dataset
+    by its parameters alone), so that a resume on other samples of the same parameters is refused. A
+    run from before worlds were recorded is resumed without a record: what it started in is unknown,
+    and recording the present world would claim it.
     """
     from tactile_braille.envs.braille_env import BrailleEnv
 
     if not isinstance(env.unwrapped, BrailleEnv):  # goal-conditioned toys have no tactile world
         return
     world = json.loads(json.dumps(env.unwrapped.world))  # as stored: tuples become lists
+    dataset = getattr(env.unwrapped._core.backend, "dataset", None)
+    if dataset is not None:
+        world["samples_sha256"] = dataset.samples_sha256
     path = run_dir / WORLD_FILE
     if path.exists():
         stored = json.loads(path.read_text())
         stored.pop("dataset", None)  # where the dataset lies may change; what it holds may not
         if stored.get("backend") == "rig" and world.get("backend") == "render":
             stored["backend"] = "render"  # recorded before the render backend named itself: the same world
-        if "samples_sha256" not in stored:  # recorded before worlds held their samples' digest
+        if "samples_sha256" not in stored:  # recorded before runs recorded their samples' digest
             world.pop("samples_sha256", None)
         differ = json_differences(stored, {k: v for k, v in world.items() if k != "dataset"})
         if differ:

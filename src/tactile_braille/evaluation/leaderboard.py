@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
@@ -34,6 +34,7 @@ from tactile_braille.agents.run import json_differences
 from tactile_braille.envs.core import WORLD_RULES
 from tactile_braille.evaluation.report import PAPER_TABLE, TASK_NAMES, TRACK_TITLES
 from tactile_braille.evaluation.results import check_result, read_result
+from tactile_braille.evaluation.statistics import bootstrap_interval, iqm, probability_of_improvement
 
 PAPER_METHOD = "Church et al. 2020, Table III (sim)"
 
@@ -71,6 +72,11 @@ class Row:
     env_steps: list[int | None]
     optimum: float | None = None
     paper: bool = False
+    tuning: str = "-"
+    """How the method's settings were chosen: a library baseline's search (``12 trials``) as its results
+    files record it, else ``-`` (our presets' tuning: docs/notes/results-account.md)."""
+    scores: list[float] = field(default_factory=list)
+    """Each seed's :func:`typing_score` (the statistics' measure)."""
 
     def rank_key(self) -> tuple[float, float]:
         return -float(np.mean(self.accuracy)), float(np.mean(self.steps))
@@ -93,8 +99,11 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
         key = (result["task"], result["method"], result["track"], result["fingerprint"], budget)
         report = result["report"]
         if key not in rows:
+            tuning = result.get("tuning")
+            trials = tuning.get("trials") if isinstance(tuning, dict) else None
+            searched = f"{trials} trials" if isinstance(trials, int) and not isinstance(trials, bool) else "-"
             rows[key] = Row(result["method"], result["track"], result["fingerprint"], [], [], [],
-                            report.get("touch_optimum"))  # fmt: skip
+                            report.get("touch_optimum"), tuning=searched)  # fmt: skip
         taken = seeds.setdefault(key, {})
         unknown = taken.get(None) if result["seed"] is not None else next(iter(taken.values()), None)
         if unknown is not None:
@@ -110,6 +119,7 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
         rows[key].accuracy.append(report["accuracy"])
         rows[key].steps.append(report["total_steps"])
         rows[key].env_steps.append(result["budget"].get("env_steps"))
+        rows[key].scores.append(typing_score(report["accuracy"], report["total_steps"], report["keys_asked"]))
     per_task: dict[str, list[Row]] = {}
     for (task, *_), row in rows.items():
         per_task.setdefault(task, []).append(row)
@@ -168,7 +178,7 @@ def leaderboard_markdown(
     """The leaderboard page (the module docstring). ``reference``: task -> fingerprint (or a prefix of
     one, as the page shows them) to rank under."""
     lines = [f"# {title}", "", _INTRO, ""]
-    for task, chosen, ranked, apart in _tasks(results, reference):
+    for task, chosen, ranked, over, apart in _tasks(results, reference):
         if strict and apart:
             where = next(w for w, r in results if r["task"] == task and r["fingerprint"] != chosen)
             raise ValueError(
@@ -176,10 +186,25 @@ def leaderboard_markdown(
                 f"than {task}'s reference {chosen[:12]}"
             )
         conditions = _conditions(results, task)
+        budget = official_budget(task)
         lines += [f"## {task}", "", _describe(conditions[chosen], chosen), ""]
+        if budget is not None:
+            lines += [f"Ranked: methods trained within the official budget, {budget:,} environment steps "
+                      f"({budget // 250} epochs of 250).", ""]  # fmt: skip
         for track in sorted({r.track for r in ranked}, key=lambda t: (t != "tactile", t)):
             lines += [f"### {TRACK_TITLES.get(track, track)}", "", *_table(
                 sorted((r for r in ranked if r.track == track), key=Row.rank_key)), ""]  # fmt: skip
+        lines += _statistics(ranked)
+        if over:
+            lines += ["### Over the official budget, or of no stated budget (not ranked with the above)", "",
+                      "| method | track | seeds | accuracy | steps | env steps trained |",
+                      "|---|---|---|---|---|---|"]  # fmt: skip
+            lines += [
+                f"| {row.method} | {row.track} | {len(row.accuracy)} | {_mean(row.accuracy, 3)} "
+                f"| {_mean(row.steps, 0)} | {_budget(row)} |"
+                for row in sorted(over, key=Row.rank_key)
+            ]
+            lines.append("")
         if apart:
             lines += ["### Under other conditions (not ranked with the above)", "",
                       "| method | track | seeds | accuracy | steps | fingerprint "
@@ -197,16 +222,38 @@ def leaderboard_markdown(
 
 
 def _tasks(results, reference: dict[str, str] | None):
-    """Per task, in the reports' order: (task, its reference fingerprint, the rows under it with the
-    paper's beside them, the rows under other conditions)."""
+    """Per task, in the reports' order: (task, its reference fingerprint, the rows under it within the
+    task's official budget with the paper's beside them, the rows under it over that budget (or of no
+    stated budget), the rows under other conditions)."""
     reference = _references(reference or {}, results)
     per_task = _rows(results)
     order = [*TASK_NAMES, *sorted(set(per_task) - set(TASK_NAMES))]
     for task in (t for t in order if t in per_task):
         chosen = reference.get(task) or _default_reference(results, task)
         apart = [row for row in per_task[task] if row.fingerprint != chosen]
-        ranked = [row for row in per_task[task] if row.fingerprint == chosen] + _paper_rows(task)
-        yield task, chosen, ranked, apart
+        held = [row for row in per_task[task] if row.fingerprint == chosen]
+        budget = official_budget(task)
+        within = [row for row in held if _within(row, budget)]
+        over = [row for row in held if not _within(row, budget)]
+        yield task, chosen, within + _paper_rows(task), over, apart
+
+
+def official_budget(task: str) -> int | None:
+    """The task's official training budget in environment steps (None: a task with none)."""
+    from tactile_braille._tasks import REGISTERED_TASKS
+
+    return next((t.budget_steps for t in REGISTERED_TASKS if task in (t.name, t.env_id)), None)
+
+
+def _within(row: Row, budget: int | None) -> bool:
+    """Whether every seed of ``row`` trained within ``budget`` environment steps (any, without one)."""
+    return budget is None or all(steps is not None and steps <= budget for steps in row.env_steps)
+
+
+def typing_score(accuracy: float, total_steps: float, keys_asked: int) -> float:
+    """One seed's typing as one number, the measure of the leaderboard's statistics: its accuracy, with
+    ties broken by fewer steps (less than one key's worth: a key typed right outweighs any speed)."""
+    return accuracy - total_steps / (keys_asked * 25 * 1_000)
 
 
 OURS = "tactile_braille "
@@ -225,7 +272,7 @@ def headline_markdown(results: list[tuple[str, dict]], reference: dict[str, str]
         "| best other method |",
         "|---|---|---|---|---|",
     ]
-    for task, _, ranked, _ in _tasks(results, reference):
+    for task, _, ranked, _, _ in _tasks(results, reference):
         best = {
             "paper": [r for r in ranked if r.paper],
             "tactile": [r for r in ranked if r.method.startswith(OURS) and r.track == "tactile"],
@@ -288,19 +335,48 @@ def _paper_rows(task: str) -> list[Row]:
 
 
 def _table(rows: list[Row]) -> list[str]:
-    lines = ["| rank | method | track | seeds | accuracy | steps | touch-only optimum | env steps trained |",
-             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    lines = ["| rank | method | track | seeds | accuracy | steps | touch-only optimum | env steps trained "
+             "| tuning |", "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     rank = 0
     for row in rows:
         rank += not row.paper
-        budget = [b for b in row.env_steps if b is not None]
         lines.append(
             f"| {'-' if row.paper else rank} | {row.method} | {row.track} "
             f"| {'-' if row.paper else len(row.accuracy)} | {_mean(row.accuracy, 3)} | {_mean(row.steps, 0)} "
-            f"| {'-' if row.optimum is None else f'{row.optimum:.0f}'} "
-            f"| {f'{np.mean(budget):,.0f}' if budget else '-'} |"
+            f"| {'-' if row.optimum is None else f'{row.optimum:.0f}'} | {_budget(row)} "
+            f"| {'-' if row.paper else row.tuning} |"
         )
     return lines
+
+
+def _budget(row: Row) -> str:
+    budget = [b for b in row.env_steps if b is not None]
+    return f"{np.mean(budget):,.0f}" if budget else "-"
+
+
+def _statistics(ranked: list[Row]) -> list[str]:
+    """The field's statistics for a task's best methods: the interquartile mean of each one's accuracy
+    over its seeds with a bootstrap interval, and the probability that our best ``tactile`` method
+    types better than the best other method (rliable's definitions, computed with SciPy)."""
+    best = {
+        "ours, tactile": [r for r in ranked if r.method.startswith(OURS) and r.track == "tactile"],
+        "ours, proprio": [r for r in ranked if r.method.startswith(OURS) and r.track == "proprio"],
+        "best other": [r for r in ranked if not r.paper and not r.method.startswith(OURS)],
+    }
+    tops = {name: min(rows, key=Row.rank_key) for name, rows in best.items() if rows}
+    if not tops:
+        return []
+    lines = ["Statistics (interquartile mean over seeds, 95 % percentile-bootstrap interval):", ""]
+    for name, row in tops.items():
+        low, high = bootstrap_interval(row.accuracy, "iqm")
+        lines.append(f"- {name}: {row.method}: accuracy IQM {iqm(row.accuracy):.3f} [{low:.3f}, {high:.3f}] "
+                     f"over {len(row.accuracy)} seed{'s' if len(row.accuracy) > 1 else ''}")  # fmt: skip
+    if "ours, tactile" in tops and "best other" in tops:
+        ours, other = tops["ours, tactile"], tops["best other"]
+        value, (low, high) = probability_of_improvement(ours.scores, other.scores)
+        lines.append(f"- probability of improvement, ours (`tactile`) over the best other method: "
+                     f"{value:.2f} [{low:.2f}, {high:.2f}] (per seed: accuracy, then steps)")  # fmt: skip
+    return [*lines, ""]
 
 
 def _mean(values, digits: int) -> str:

@@ -35,6 +35,7 @@ from tactile_braille.agents.report import convergence_epoch
 from tactile_braille.agents.run import read_config, read_progress, run_world
 from tactile_braille.datasets.collector import GENERATOR_VERSION
 from tactile_braille.envs.registry import task_name, task_of
+from tactile_braille.evaluation.statistics import bootstrap_interval, iqm
 
 TASK_NAMES = {task.name: task.label for task in REGISTERED_TASKS}
 """Each registered task's short name in the reports (the paper's Table III rows), in the paper's order."""
@@ -54,30 +55,6 @@ PAPER_TABLE: dict[tuple[str, str, str], tuple[int, float, int]] = {
     ("robot", "ContinuousArrows-v0", "sac"): (364, 0.938, 76),
 }
 """The paper's Table III: (platform, task, algo) -> (typing steps, typing accuracy, convergence epoch)."""
-
-
-# ------------------------------------------------------------------ statistics
-def bootstrap_ci(
-    values, confidence: float = 0.95, resamples: int = 10_000, seed: int = 0
-) -> tuple[float, float]:
-    """Percentile bootstrap confidence interval of the mean (NaN, NaN for no values)."""
-    values = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float)
-    if values.size == 0:
-        return float("nan"), float("nan")
-    rng = np.random.default_rng(seed)
-    means = values[rng.integers(values.size, size=(resamples, values.size))].mean(axis=1)
-    tail = (1.0 - confidence) / 2 * 100
-    low, high = np.percentile(means, [tail, 100 - tail])
-    return float(low), float(high)
-
-
-def iqm(values) -> float:
-    """Interquartile mean: the mean of the middle half (floor(n/4) values trimmed at each end)."""
-    values = np.sort(np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float))
-    if values.size == 0:
-        return float("nan")
-    cut = values.size // 4
-    return float(values[cut : values.size - cut].mean())
 
 
 # ------------------------------------------------------------------ runs
@@ -260,7 +237,7 @@ def _stat(values, digits: int = 1) -> str:
         return "-"
     if len(values) == 1:
         return f"{values[0]:.{digits}f} (one run)"
-    low, high = bootstrap_ci(values)
+    low, high = bootstrap_interval(values)
     text = f"{np.mean(values):.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
     return text + (f"; IQM {iqm(values):.{digits}f}" if len(values) >= 4 else "")
 

@@ -29,6 +29,10 @@ RESULT_FORMAT = "tactile_braille.result/2"
 REQUIRED = ("format", "method", "task", "track", "seed", "budget", "fingerprint", "report", "seal")
 CONDITIONS = {"task", "protocol", "sequences", "max_episode_steps", "start_seed", "world", "project_version"}
 """What a report's conditions (what its fingerprint hashes) must name."""
+REPORT_FIELDS = frozenset({"task", "protocol", "track", "accuracy", "total_steps", "keys_asked", "sequences",
+                           "fingerprint", "conditions", "confusion", "touch_optimum", "sentences",
+                           "steps_per_key"})  # fmt: skip
+"""What every report holds (``typing_bound`` too, in files written since it was added)."""
 SEAL_DIGITS = 16
 """Hexadecimal digits of each field's SHA-256 kept in a seal."""
 TOLERANCE = 1e-9
@@ -133,6 +137,10 @@ def _check_seal(result: dict, where: str) -> None:
         kind = type(recorded).__name__
         raise ValueError(f"{where}: its seal must be an object of field digests, got a {kind}")
     found = seal(result)
+    sealed = {*REQUIRED, *(f"report.{name}" for name in REPORT_FIELDS)} - {"seal", "report"}
+    unsealed = sorted(sealed - set(recorded))
+    if unsealed:
+        raise ValueError(f"{where}: its seal lacks {unsealed} (edited?); score the policy again")
     added = sorted(set(found) - set(recorded))
     removed = sorted(set(recorded) - set(found))
     changed = [name for name in found if name in recorded and recorded[name] != found[name]]
@@ -156,6 +164,9 @@ def check_content(result: dict, where: str) -> None:
         _check_count(value, f"budget.{name}", where, none=True)
     if not isinstance(result["report"], dict):
         raise ValueError(f"{where}: its report must be an object, got {type(result['report']).__name__}")
+    missing = sorted(REPORT_FIELDS - set(result["report"]))
+    if missing:
+        raise ValueError(f"{where}: its report lacks {missing}")
     try:
         report = TypingReport.from_dict(result["report"])
     except (TypeError, ValueError) as error:
@@ -188,8 +199,9 @@ def _check_fraction(value, name: str, where: str) -> None:
 def _check_report(report: TypingReport, recorded: dict, where: str) -> None:
     """The report's numbers checked against each other and against the conditions they were scored under."""
     sequences, limit = report.conditions["sequences"], report.conditions["max_episode_steps"]
-    if not isinstance(sequences, list) or not all(isinstance(s, list) and s for s in sequences):
-        raise ValueError(f"{where}: report.conditions.sequences must be a list of key sequences")
+    listed = isinstance(sequences, list) and all(isinstance(s, list) and s for s in sequences)
+    if not listed or not sequences:
+        raise ValueError(f"{where}: report.conditions.sequences must be a non-empty list of key sequences")
     _check_count(limit, "report.conditions.max_episode_steps", where)
     for name in ("total_steps", "keys_asked", "sequences"):
         _check_count(getattr(report, name), f"report.{name}", where)

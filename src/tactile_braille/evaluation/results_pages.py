@@ -38,7 +38,6 @@ from tactile_braille.evaluation.report import (
     TRACK_TITLES,
     TYPING_COLUMNS,
     RunRecord,
-    bootstrap_ci,
     by_task_section,
     coverage_section,
     first_095_text,
@@ -57,6 +56,7 @@ from tactile_braille.evaluation.report import (
     typing_cells,
     warm_start_section,
 )
+from tactile_braille.evaluation.statistics import bootstrap_interval
 
 Groups = dict[tuple[str, str, str], list[RunRecord]]
 
@@ -294,7 +294,7 @@ def _steps_per_key_bars(ax, x: float, records: list[RunRecord], colour: str) -> 
         if not typed:
             continue
         per_key = [t["total_steps"] / t["keys_asked"] for _, t in typed]
-        mean, (low, high) = float(np.mean(per_key)), bootstrap_ci(per_key)
+        mean, (low, high) = float(np.mean(per_key)), bootstrap_interval(per_key)
         ax.bar(x + offset, mean, width=0.38, color=colour, alpha=shade, edgecolor=colour,
                hatch=None if protocol == "paper" else "//")  # fmt: skip
         if len(per_key) > 1:

@@ -71,6 +71,9 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
               "released_protocol": {**_summary(released), "fingerprint": released.fingerprint}}  # fmt: skip
     if report.sentences is not None:
         output["sentences"] = report.sentences
+    # The results file is made (and checked) before anything is written.
+    result = make_result(report, method=run_method(config), seed=config.seed, epochs=epoch + 1,
+                         env_steps=env_steps)  # fmt: skip
     confusion = np.array(report.confusion["counts"])
     save_typing_confusion(confusion, report.confusion["rows"], report.confusion["columns"],
                           run_dir / "typing_confusion.png",
@@ -78,8 +81,6 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
                           f"{report.total_steps} steps")  # fmt: skip
     with atomic_path(run_dir / "typing.json") as temporary:
         temporary.write_text(json.dumps(output, indent=2))
-    result = make_result(report, method=run_method(config), seed=config.seed, epochs=epoch + 1,
-                         env_steps=env_steps)  # fmt: skip
     write_result(result, run_dir / RESULT_FILE, overwrite=True)
     return output
 

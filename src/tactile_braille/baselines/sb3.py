@@ -1,0 +1,358 @@
+"""Stable-Baselines3 with Hindsight Experience Replay, tuned by the benchmark's protocol.
+
+The agents are SB3's own (DQN on the discrete tasks; SAC and TD3 on the
+continuous ones) with its ``HerReplayBuffer``, on the environment exactly as
+registered (the ``tactile`` track), scored by
+:func:`~tactile_braille.evaluation.evaluate_policy`. The protocol every method
+on the leaderboard gets (docs/benchmark.md#the-tuning-protocol):
+
+1. **Search** (``tune``): an Optuna study (TPE; median pruning on the typing
+   score at a third and two thirds of the budget) over the algorithm's
+   :data:`SEARCH_SPACES`, each trial trained for the task's official budget on
+   one tuning seed (100 unless told; seeds 100-199 are never reported) and
+   scored by typing accuracy, then by steps. The untuned :data:`DEFAULTS` are
+   always among the trials. The study lives in a SQLite file whose trials send
+   a heartbeat, so a killed search resumes where it stopped (its unfinished
+   trial is failed and run again), and two processes can search one study
+   side by side.
+2. **Final runs** (``run``): the best trial's settings, trained on fresh seeds
+   at the same budget; each results file records the search (space, trials,
+   tuning seeds, chosen settings) under ``tuning``.
+
+    python -m tactile_braille.baselines.sb3 tune DiscreteArrows-v0 dqn --trials 16 --study runs/tune
+    python -m tactile_braille.baselines.sb3 run DiscreteArrows-v0 dqn --study runs/tune --seeds 0 1 2 3 4 \\
+        --into results/leaderboard/sb3-tuned
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+from tactile_braille._io import atomic_path
+from tactile_braille._tasks import REGISTERED_TASKS
+from tactile_braille.evaluation.results import make_result, write_result
+from tactile_braille.evaluation.scoring import TypingReport, evaluate_policy
+
+TUNING_SEEDS = tuple(range(100, 200))
+"""Seeds a search may train on; results are reported on others."""
+DEFAULTS: dict[str, dict] = {
+    "dqn": {"learning_rate": 1e-4, "gamma": 0.99, "batch_size": 32, "train_freq": 1, "gradient_steps": 1,
+            "learning_starts": 1_000, "target_update_interval": 500, "exploration_fraction": 0.3,
+            "exploration_final_eps": 0.05, "goal_selection_strategy": "future", "n_sampled_goal": 4},
+    "sac": {"learning_rate": 3e-4, "gamma": 0.99, "batch_size": 64, "learning_starts": 1_000, "tau": 0.005,
+            "goal_selection_strategy": "future", "n_sampled_goal": 4},
+    "td3": {"learning_rate": 1e-3, "gamma": 0.99, "batch_size": 64, "learning_starts": 1_000, "tau": 0.005,
+            "goal_selection_strategy": "future", "n_sampled_goal": 4},
+}  # fmt: skip
+"""Each algorithm's settings before any search: SB3's defaults, but for a learning start, a target
+network, an exploration decay and an update every step that fit these budgets (DQN) and batches of
+64 (SAC, TD3), as the untuned rows of the leaderboard ran (``examples/sb3_her.py``). The image
+network is shared by the actor and critics (``share_features_extractor``) in SAC and TD3."""
+
+Choice = tuple
+"""A categorical dimension of a search space: its values."""
+
+
+@dataclass(frozen=True)
+class Range:
+    """A numeric dimension of a search space: ``low`` to ``high``, on a log scale with ``log``."""
+
+    low: float
+    high: float
+    log: bool = False
+
+
+_HER = {
+    "goal_selection_strategy": Choice(("future", "final", "episode")),
+    "n_sampled_goal": Choice((2, 4, 8)),
+}
+SEARCH_SPACES: dict[str, dict[str, Range | Choice]] = {
+    "dqn": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
+            "batch_size": Choice((32, 64)), "train_freq": Choice((1, 4)), "gradient_steps": Choice((1, 2)),
+            "learning_starts": Choice((200, 500, 1_000)),
+            "target_update_interval": Choice((100, 250, 500, 1_000)), "exploration_fraction": Range(0.1, 0.5),
+            "exploration_final_eps": Choice((0.02, 0.05, 0.1)), **_HER},
+    "sac": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
+            "batch_size": Choice((64, 128)), "learning_starts": Choice((200, 500, 1_000)),
+            "tau": Choice((0.005, 0.01, 0.02)), **_HER},
+    "td3": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
+            "batch_size": Choice((64, 128)), "learning_starts": Choice((200, 500, 1_000)),
+            "tau": Choice((0.005, 0.01, 0.02)), **_HER},
+}  # fmt: skip
+"""What a search may change, per algorithm (the HER goal strategy and count for all)."""
+LABELS = {"dqn": "SB3 DQN + HER", "sac": "SB3 SAC + HER", "td3": "SB3 TD3 + HER"}
+
+
+def official_budget(task: str) -> int:
+    """The task's official training budget in environment steps (:mod:`tactile_braille._tasks`)."""
+    for registered in REGISTERED_TASKS:
+        if task in (registered.name, registered.env_id):
+            return registered.budget_steps
+    raise ValueError(f"unknown task {task!r}; choose one of {[t.name for t in REGISTERED_TASKS]}")
+
+
+def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None):
+    """An SB3 model of ``algo`` with ``settings`` (:data:`DEFAULTS`' names) on ``task``, its replay
+    holding the whole run."""
+    from stable_baselines3 import DQN, SAC, TD3, HerReplayBuffer
+
+    if algo not in DEFAULTS:
+        raise ValueError(f"algo must be one of {sorted(DEFAULTS)}, got {algo!r}")
+    settings = {**DEFAULTS[algo], **settings}
+    her = {name: settings.pop(name) for name in ("goal_selection_strategy", "n_sampled_goal")}
+    settings["learning_starts"] = min(settings["learning_starts"], steps)
+    if algo != "dqn":
+        settings["policy_kwargs"] = {"share_features_extractor": True}
+    env = gym.make(f"tactile_braille/{task}", **({"dataset": str(dataset)} if dataset else {}))
+    model_class = {"dqn": DQN, "sac": SAC, "td3": TD3}[algo]
+    return model_class(
+        "MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=her,
+        buffer_size=max(steps, 1), seed=seed, device="cpu", verbose=0, **settings,
+    )  # fmt: skip
+
+
+def score(model, task: str, dataset=None) -> TypingReport:
+    """The model's deterministic policy typing the paper's sequences (the benchmark's protocol)."""
+    return evaluate_policy(lambda observation: model.predict(observation, deterministic=True)[0], task,
+                           dataset=dataset)  # fmt: skip
+
+
+def train(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None, checks=(), check=None):
+    """Train for ``steps`` environment steps; ``check(steps_so_far, report)`` is called with a typing
+    report after each step count in ``checks`` (a search's pruning). Returns (model, seconds)."""
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    torch.set_num_threads(1)
+    model = make_model(task, algo, settings, steps, seed, dataset)
+
+    class Checks(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps in checks and check is not None:
+                check(self.num_timesteps, score(self.model, task, dataset))
+            return True
+
+    start = time.perf_counter()
+    model.learn(steps, callback=Checks())
+    return model, time.perf_counter() - start
+
+
+def objective(report: TypingReport) -> float:
+    """What a search maximises: typing accuracy, then (by less than one key's worth) fewer steps."""
+    return report.accuracy - report.total_steps / (report.keys_asked * 25 * 1_000)
+
+
+# ------------------------------------------------------------------ the search
+def _study(path: Path, task: str, algo: str, create: bool):
+    """The search's study in the SQLite file ``path``: its trials send a heartbeat, so that a trial
+    whose process was killed is failed (and not counted) when any process next searches."""
+    import optuna
+
+    if not create and not path.exists():
+        raise FileNotFoundError(f"no study at {path}: run `tune` first")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    storage = optuna.storages.RDBStorage(f"sqlite:///{path}", heartbeat_interval=30, grace_period=120)
+    return optuna.create_study(
+        study_name=f"{task}__{algo}", storage=storage, direction="maximize", load_if_exists=True,
+        sampler=optuna.samplers.TPESampler(), pruner=optuna.pruners.MedianPruner(n_startup_trials=4),
+    )  # fmt: skip
+
+
+FINISHED = ("COMPLETE", "PRUNED")
+"""The trial states a search counts (a failed trial, its process killed, is run again)."""
+
+
+def _finished(study) -> list:
+    return [t for t in study.trials if t.state.name in FINISHED]
+
+
+def _suggest(trial, space: dict[str, Range | Choice]) -> dict:
+    return {name: trial.suggest_float(name, dim.low, dim.high, log=dim.log) if isinstance(dim, Range)
+            else trial.suggest_categorical(name, list(dim)) for name, dim in space.items()}  # fmt: skip
+
+
+def tune(task: str, algo: str, trials: int, study_dir: Path, seed: int = TUNING_SEEDS[0], steps=None,
+         dataset=None) -> dict:  # fmt: skip
+    """Run the search until the study holds ``trials`` finished or pruned trials (the module docstring);
+    returns :func:`summary`, also written beside the study. A study searches with one seed and one
+    budget: another is refused."""
+    import optuna
+
+    if seed not in TUNING_SEEDS:
+        raise ValueError(
+            f"a search trains on tuning seeds ({TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]}), got {seed}"
+        )
+    steps = steps or official_budget(task)
+    path = Path(study_dir) / f"{task}__{algo}.db"
+    study = _study(path, task, algo, create=True)
+    for name, value in (("seed", seed), ("steps", steps)):
+        recorded = study.user_attrs.get(name)
+        if recorded is None:
+            study.set_user_attr(name, value)
+        elif recorded != value:
+            raise ValueError(f"{path} searches with {name} {recorded}, not {value}: one study, one protocol")
+    defaults = {name: DEFAULTS[algo][name] for name in SEARCH_SPACES[algo]}
+    queued = [t.params or t.system_attrs.get("fixed_params") for t in study.trials if t.state.name != "FAIL"]
+    if defaults not in queued:  # the untuned settings are always among the trials
+        study.enqueue_trial(defaults)
+    checks = (steps // 3, 2 * steps // 3)
+
+    def run_trial(trial) -> float:
+        settings = _suggest(trial, SEARCH_SPACES[algo])
+        trial.set_user_attr("seed", seed)
+        trial.set_user_attr("steps", steps)
+
+        def check(done: int, report: TypingReport) -> None:
+            trial.report(objective(report), done)
+            if trial.should_prune():
+                raise optuna.TrialPruned()
+
+        model, seconds = train(task, algo, settings, steps, seed, dataset, checks, check)
+        report = score(model, task, dataset)
+        trial.set_user_attr("accuracy", report.accuracy)
+        trial.set_user_attr("total_steps", report.total_steps)
+        trial.set_user_attr("minutes", round(seconds / 60, 2))
+        return objective(report)
+
+    while len(_finished(study)) < trials:
+        study.optimize(run_trial, n_trials=1)
+        _write_summary(path, summary(study, task, algo))
+    result = summary(study, task, algo)
+    _write_summary(path, result)
+    return result
+
+
+def summary(study, task: str, algo: str) -> dict:
+    """The search as a results file records it: space, budget, tuning seed, its finished trials (the
+    count, and each), the best."""
+    finished = _finished(study)
+    complete = [t for t in finished if t.state.name == "COMPLETE"]
+    best = max(complete, key=lambda t: t.value) if complete else None
+    space = {name: {"range": [dim.low, dim.high], "log": dim.log} if isinstance(dim, Range)
+             else {"choice": list(dim)} for name, dim in SEARCH_SPACES[algo].items()}  # fmt: skip
+    return {
+        "library": "stable-baselines3",
+        "algo": algo,
+        "task": task,
+        "search": "optuna TPE, median pruning",
+        "space": space,
+        "defaults": DEFAULTS[algo],
+        "objective": "typing accuracy, then fewer steps",
+        "seed": study.user_attrs.get("seed"),
+        "steps": study.user_attrs.get("steps"),
+        "trials": len(finished),
+        "trial_log": [
+            {"number": t.number, "state": t.state.name, "params": t.params, "value": t.value, **t.user_attrs}
+            for t in finished
+        ],
+        "best": None if best is None else {"number": best.number, "params": best.params, **best.user_attrs},
+    }
+
+
+def _write_summary(study_path: Path, content: dict) -> None:
+    with atomic_path(study_path.with_suffix(".json")) as temporary:
+        temporary.write_text(json.dumps(content, indent=2, default=_plain) + "\n")
+
+
+def _plain(value):
+    return value.item() if isinstance(value, np.generic) else str(value)
+
+
+# ------------------------------------------------------------------ final runs
+def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None) -> list[Path]:
+    """The best trial's settings trained on each of ``seeds`` (none a tuning seed) at the budget the
+    search used; one results file each in ``into``. A file that exists is kept and a seed another
+    process is training is left to it, so calls can go on side by side and after a stop."""
+    from tactile_braille._io import LockedError, exclusive_lock
+
+    clash = sorted(set(seeds) & set(TUNING_SEEDS))
+    if clash:
+        raise ValueError(f"seeds {clash} are tuning seeds: report on others")
+    path = Path(study_dir) / f"{task}__{algo}.db"
+    study = _study(path, task, algo, create=False)
+    going = [t.number for t in study.trials if t.state.name in ("RUNNING", "WAITING")]
+    if going:
+        raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
+    tuning = summary(study, task, algo)
+    if tuning["best"] is None:
+        raise ValueError(f"{path} holds no finished trial yet")
+    Path(into).mkdir(parents=True, exist_ok=True)
+    written = []
+    for seed in seeds:
+        target = Path(into) / f"{task}__{algo}__{seed}.json"
+        try:
+            with exclusive_lock(target.with_name(f".{target.name}.lock"), f"the run of {target}"):
+                if not target.exists():
+                    model, seconds = train(
+                        task, algo, tuning["best"]["params"], tuning["steps"], seed, dataset
+                    )
+                    result = make_result(
+                        score(model, task, dataset), method=f"{LABELS[algo]} (tuned)", seed=seed,
+                        env_steps=tuning["steps"],
+                        notes=f"tactile_braille.baselines.sb3; {seconds / 60:.1f} min on one CPU thread",
+                    )  # fmt: skip
+                    write_result(_with_tuning(result, tuning), target)
+        except LockedError:
+            continue  # another process trains this seed
+        written.append(target)
+    return written
+
+
+def _with_tuning(result: dict, tuning: dict) -> dict:
+    """``result`` with its search recorded under ``tuning``, sealed again (as :func:`make_result` would)."""
+    from tactile_braille.evaluation.results import seal
+
+    content = {name: value for name, value in result.items() if name != "seal"}
+    content["tuning"] = json.loads(json.dumps(tuning, default=_plain))
+    return {**content, "seal": seal(content)}
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m tactile_braille.baselines.sb3", description=__doc__.split("\n")[0]
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+    for name in ("tune", "run"):
+        command = commands.add_parser(name)
+        command.add_argument("task", help="e.g. DiscreteArrows-v0")
+        command.add_argument("algo", choices=sorted(DEFAULTS))
+        command.add_argument(
+            "--study", type=Path, required=True, help="folder of the search's study (SQLite)"
+        )
+        command.add_argument("--dataset", type=Path, help="the dataset backend's file (default: cached)")
+    commands.choices["tune"].add_argument("--trials", type=int, required=True, help="trials to finish in all")
+    commands.choices["tune"].add_argument("--seed", type=int, default=TUNING_SEEDS[0], help="the tuning seed")
+    commands.choices["tune"].add_argument(
+        "--steps", type=int, help="training steps (default: the official budget)"
+    )
+    commands.choices["run"].add_argument("--seeds", type=int, nargs="+", required=True)
+    commands.choices["run"].add_argument(
+        "--into", type=Path, required=True, help="folder of the results files"
+    )
+    args = parser.parse_args(argv)
+    if args.command == "tune":
+        found = tune(args.task, args.algo, args.trials, args.study, args.seed, args.steps, args.dataset)
+        best = found["best"]
+        if best is None:
+            print(f"{len(found['trials'])} trials, none finished")
+        else:
+            print(
+                f"{len(found['trials'])} trials; best #{best['number']}: accuracy {best['accuracy']:.3f} in "
+                f"{best['total_steps']} steps with {best['params']}"
+            )
+    else:
+        for path in run_seeds(args.task, args.algo, args.study, args.seeds, args.into, args.dataset):
+            report = json.loads(path.read_text())["report"]
+            print(f"{path}: accuracy {report['accuracy']:.3f} in {report['total_steps']} steps")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,45 @@
+"""The library baselines' tuning protocol, run for real on a tiny budget: an Optuna search on a tuning
+seed that resumes from its journal, then final runs on fresh seeds whose results files record it."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tactile_braille.baselines import sb3
+from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
+from tactile_braille.evaluation.results import read_result
+
+ARROWS = "tactile_braille/DiscreteArrows-v0"
+
+
+@pytest.mark.slow
+def test_a_search_resumes_and_its_final_runs_record_it(env_datasets, tmp_path):
+    dataset, study = env_datasets[ARROWS], tmp_path / "study"
+    first = sb3.tune("DiscreteArrows-v0", "dqn", 1, study, steps=60, dataset=dataset)
+    assert [t["number"] for t in first["trial_log"]] == [0] and first["trials"] == 1
+    defaults = {name: sb3.DEFAULTS["dqn"][name] for name in sb3.SEARCH_SPACES["dqn"]}
+    assert first["trial_log"][0]["params"] == defaults  # the untuned settings are always a trial
+    again = sb3.tune("DiscreteArrows-v0", "dqn", 2, study, steps=60, dataset=dataset)
+    assert [t["number"] for t in again["trial_log"]] == [0, 1]  # went on from the study: one more trial
+    assert json.loads((study / "DiscreteArrows-v0__dqn.json").read_text())["best"] == again["best"]
+    with pytest.raises(ValueError, match="searches with steps 60, not 90: one study, one protocol"):
+        sb3.tune("DiscreteArrows-v0", "dqn", 3, study, steps=90, dataset=dataset)
+    (path,) = sb3.run_seeds("DiscreteArrows-v0", "dqn", study, [7], tmp_path / "out", dataset)
+    tuning = read_result(path)["tuning"]
+    assert read_result(path)["seed"] == 7 and read_result(path)["budget"]["env_steps"] == 60
+    assert (tuning["trials"], tuning["seed"], tuning["steps"]) == (2, 100, 60)
+    assert tuning["best"] == json.loads(json.dumps(again["best"]))
+    assert tuning["space"]["goal_selection_strategy"] == {"choice": ["future", "final", "episode"]}
+    assert "| 2 trials |" in leaderboard_markdown(load_results([path]))
+
+
+def test_the_protocol_refuses_to_tune_on_reported_seeds_or_report_tuning_seeds(tmp_path):
+    with pytest.raises(ValueError, match="a search trains on tuning seeds"):
+        sb3.tune("DiscreteArrows-v0", "dqn", 1, tmp_path, seed=0)
+    with pytest.raises(ValueError, match=r"seeds \[100\] are tuning seeds"):
+        sb3.run_seeds("DiscreteArrows-v0", "dqn", tmp_path, [0, 100], tmp_path / "out")
+    with pytest.raises(FileNotFoundError, match="no study at"):
+        sb3.run_seeds("DiscreteArrows-v0", "dqn", tmp_path, [0], tmp_path / "out")
+    assert [sb3.official_budget(task) for task in ("DiscreteArrows-v0", ARROWS)] == [6_250, 6_250]

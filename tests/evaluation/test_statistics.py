@@ -1,0 +1,43 @@
+"""The statistics of reports and the leaderboard: rliable's definitions, computed with SciPy."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactile_braille.evaluation.statistics import bootstrap_interval, iqm, probability_of_improvement
+
+
+def test_the_bootstrap_interval_brackets_the_mean_and_shrinks_with_more_data():
+    rng = np.random.default_rng(0)
+    small, large = rng.normal(1.0, 1.0, 10), rng.normal(1.0, 1.0, 1000)
+    low, high = bootstrap_interval(small)
+    assert low < small.mean() < high
+    low_large, high_large = bootstrap_interval(large)
+    assert high_large - low_large < (high - low) / 5  # width ~ 1/sqrt(n)
+    assert low_large < 1.0 < high_large
+    assert bootstrap_interval([2.0, 2.0, 2.0]) == (2.0, 2.0)
+    assert all(np.isnan(bootstrap_interval([])))
+    assert bootstrap_interval([1.0, None, 3.0]) != (np.nan, np.nan)  # None (not reached) is skipped
+    assert bootstrap_interval(small) == bootstrap_interval(small)  # seeded: pages regenerate alike
+    with pytest.raises(ValueError, match="statistic must be one of"):
+        bootstrap_interval(small, "median")
+
+
+def test_iqm_trims_a_quarter_at_each_end_and_has_an_interval():
+    assert iqm([1, 2, 3, 4, 5, 6, 7, 100]) == pytest.approx(np.mean([3, 4, 5, 6]))
+    assert iqm([1.0, 2.0, 3.0]) == 2.0  # fewer than 4 values: nothing to trim
+    assert np.isnan(iqm([]))
+    values = [0.2, 0.4, 0.5, 0.9, 1.0]
+    low, high = bootstrap_interval(values, "iqm")
+    assert 0.2 <= low < iqm(values) < high <= 1.0
+
+
+def test_the_probability_of_improvement_counts_pairs_and_ties_half():
+    # Of the 4 pairs, 3 wins and 1 tie: (1 > .5), (1 > .2), (.5 = .5), (.5 > .2).
+    value, (low, high) = probability_of_improvement([1.0, 0.5], [0.5, 0.2])
+    assert value == pytest.approx((1 + 1 + 0.5 + 1) / 4) and 0.0 <= low <= value <= high <= 1.0
+    assert probability_of_improvement([1.0] * 3, [1.0] * 3) == (0.5, (0.5, 0.5))
+    assert probability_of_improvement([0.0], [1.0])[0] == 0.0
+    with pytest.raises(ValueError, match="at least one run of each"):
+        probability_of_improvement([], [1.0])
