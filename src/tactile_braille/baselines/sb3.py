@@ -270,6 +270,8 @@ def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=
     """The best trial's settings trained on each of ``seeds`` (none a tuning seed) at the budget the
     search used; one results file each in ``into``. A file that exists is kept and a seed another
     process is training is left to it, so calls can go on side by side and after a stop."""
+    import optuna
+
     from tactile_braille._io import LockedError, exclusive_lock
 
     clash = sorted(set(seeds) & set(TUNING_SEEDS))
@@ -277,6 +279,7 @@ def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=
         raise ValueError(f"seeds {clash} are tuning seeds: report on others")
     path = Path(study_dir) / f"{task}__{algo}.db"
     study = _study(path, task, algo, create=False)
+    optuna.storages.fail_stale_trials(study)  # trials whose process stopped sending its heartbeat
     going = [t.number for t in study.trials if t.state.name in ("RUNNING", "WAITING")]
     if going:
         raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
@@ -288,7 +291,7 @@ def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=
     for seed in seeds:
         target = Path(into) / f"{task}__{algo}__{seed}.json"
         try:
-            with exclusive_lock(target.with_name(f".{target.name}.lock"), f"the run of {target}"):
+            with exclusive_lock(path.parent / f".{target.name}.lock", f"the run of {target}"):
                 if not target.exists():
                     model, seconds = train(
                         task, algo, tuning["best"]["params"], tuning["steps"], seed, dataset
@@ -341,10 +344,10 @@ def main(argv=None) -> int:
         found = tune(args.task, args.algo, args.trials, args.study, args.seed, args.steps, args.dataset)
         best = found["best"]
         if best is None:
-            print(f"{len(found['trials'])} trials, none finished")
+            print(f"{found['trials']} trials finished, none complete (all pruned)")
         else:
             print(
-                f"{len(found['trials'])} trials; best #{best['number']}: accuracy {best['accuracy']:.3f} in "
+                f"{found['trials']} trials; best #{best['number']}: accuracy {best['accuracy']:.3f} in "
                 f"{best['total_steps']} steps with {best['params']}"
             )
     else:
