@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
+import torch
 
 from tactile_braille.agents import TrainConfig, read_progress
 from tactile_braille.agents.run import CHECKPOINT_FILE, LOCK_FILE, check_resumable, read_config
@@ -325,10 +326,10 @@ def test_a_render_run_recorded_as_rig_resumes_and_another_world_is_refused(tmp_p
 EXACT = TrainConfig(
     epochs=4, steps_per_epoch=30, start_steps=10, threads=1, seed=1, precision="fp32",
     agent={"batch_size": 8, "hidden": (16,)}, evaluation={"test_episodes": 2, "snapshots": 1},
-    replay={"capacity": 2000}, keep_pose_fraction=0.5,
+    replay={"capacity": 2000}, keep_pose_fraction=0.9,
 )  # fmt: skip
-"""Epochs of 30 steps and episodes of up to 25: most checkpoints fall inside an episode; half the
-episodes keep the pose the last one left (the reset a resume must put back)."""
+"""Epochs of 30 steps and episodes of up to 25: most checkpoints fall inside an episode; nine in
+ten episodes after the first keep the pose the last one left (the reset a resume must put back)."""
 KILLS = {
     "mid-episode, epoch 1": "Episodes.step", "mid-episode, epoch 2": "Episodes.step",
     "between a row and its checkpoint": "EpochLog.write", "mid-checkpoint": "EpisodeReplayBuffer.save",
@@ -374,11 +375,16 @@ def test_a_run_killed_anywhere_and_resumed_logs_the_uninterrupted_runs_rows(env_
     whole = train(config, run_dir=tmp_path / "whole", progress=False)
     expected = _rows_but_time(whole)
     assert len(expected) == 4
+    kept = []
     for name, where in KILLS.items():
         run = tmp_path / name.replace(" ", "_").replace(",", "")
         _kill_at(run, config, where, AT[name])
+        episode = torch.load(run / CHECKPOINT_FILE, weights_only=False)["episode"]
+        kept.append(episode["kept_pose"] is not None)
+        assert episode["actions"], f"{name}: the checkpoint holds no episode in progress to resume"
         train(run_dir=run, resume=True, progress=False)
         assert _rows_but_time(run) == expected, name
+    assert any(kept), "no resumed episode had kept its pose: the kept-pose reset went untested"
 
 
 def test_a_resume_on_other_samples_of_the_same_dataset_parameters_is_refused(finished_run, tmp_path, capsys):

@@ -212,7 +212,6 @@ class Episodes:
             return
         self.kept_starts, self.final_presses = resume["kept_starts"], resume["final_presses"]
         if resume["kept_pose"] is not None:  # the pose the episode kept: where the one before it ended
-            self.env.reset(seed=resume["seed"])
             self.env.unwrapped.place_sensor(resume["kept_pose"])
         self._reset(resume["seed"], resume["kept_pose"] is not None)
         final_presses = self.final_presses

@@ -123,12 +123,12 @@ class BrailleEnv(gym.Env):
         return {"cell": core.cell[0].tolist(), "position_mm": core.position_mm[0].tolist()}
 
     def place_sensor(self, placement: dict) -> None:
-        """Put the sensor where :meth:`sensor_placement` found it (for the next ``keep_pose`` reset; the
-        observation is not tapped again): how a resumed training run restores the pose an episode kept."""
-        if not self._path_mm:
-            raise ValueError("place_sensor needs an earlier reset")
+        """Put the sensor where :meth:`sensor_placement` found it, for the next ``keep_pose`` reset (no
+        tap is made here): how a resumed training run restores the pose an episode kept."""
         self._core.cell[0] = placement["cell"]
         self._core.position_mm[0] = placement["position_mm"]
+        pose = self._core.sensor_pose_mm()[0]
+        self._path_mm = [(pose[0], pose[1])]  # a pose to keep, as after an episode
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Start an episode: a random goal key and a random start pose.
