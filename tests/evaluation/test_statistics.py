@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.stats import mannwhitneyu
 
 from tactile_braille.evaluation.statistics import bootstrap_interval, iqm, probability_of_improvement
 
@@ -41,3 +42,7 @@ def test_the_probability_of_improvement_counts_pairs_and_ties_half():
     assert probability_of_improvement([0.0], [1.0])[0] == 0.0
     with pytest.raises(ValueError, match="at least one run of each"):
         probability_of_improvement([], [1.0])
+    # The Mann-Whitney U statistic over the pairs, as SciPy computes it.
+    rng = np.random.default_rng(3)
+    x, y = rng.integers(0, 4, 7).astype(float), rng.integers(0, 4, 5).astype(float)
+    assert probability_of_improvement(x, y)[0] == pytest.approx(mannwhitneyu(x, y).statistic / 35)
