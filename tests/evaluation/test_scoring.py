@@ -491,14 +491,13 @@ def test_the_leaderboard_ranks_within_the_official_budget_and_lists_the_rest_apa
     assert "| pose oracle, trained long | tactile | 1 | 1.000 |" in over and "budget unstated" in over
 
 
-def test_a_searched_method_states_its_trials_and_the_page_compares_the_best(arrows):
-    from tactile_braille.baselines.sb3 import _with_tuning
-
+def test_a_searched_method_states_its_trials_and_the_page_compares_the_best(arrows, tmp_path):
     oracle = evaluate_policy(lambda o: oracle_action(arrows), ARROWS, env=arrows)
     ours = [(f"o{seed}.json", make_result(oracle, method="tactile_braille oracle", seed=seed, env_steps=0))
             for seed in range(3)]  # fmt: skip
-    tuned = [(f"t{seed}.json", _with_tuning(_result(arrows, method="SB3 press", seed=seed), {"trials": 12}))
-             for seed in range(3)]  # fmt: skip
+    pressing = evaluate_policy(press, ARROWS, env=arrows)
+    tuned = [(f"t{seed}.json", make_result(pressing, method="SB3 press", seed=seed, env_steps=0,
+                                           tuning={"trials": 12})) for seed in range(3)]  # fmt: skip
     page = leaderboard_markdown([*ours, *tuned])
     assert (
         "| 2 | SB3 press | tactile | 3 | 0.177 [0.177, 0.177] | 768 [768, 768] | 237 | 0 | 12 trials |"
@@ -507,7 +506,7 @@ def test_a_searched_method_states_its_trials_and_the_page_compares_the_best(arro
     assert (
         "probability of improvement, ours (`tactile`) over the best other method: 1.00 [1.00, 1.00]" in page
     )
-    assert read_result(write_result(tuned[0][1], Path(__import__("tempfile").mkdtemp()) / "t.json"))["tuning"]
+    assert read_result(write_result(tuned[0][1], tmp_path / "t.json"))["tuning"] == {"trials": 12}
 
 
 def test_the_headline_table_takes_the_best_of_the_paper_ours_per_track_and_the_others(arrows, tmp_path):

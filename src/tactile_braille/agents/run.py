@@ -175,9 +175,8 @@ def record_world(run_dir: Path, env, resume: bool) -> None:
     if not isinstance(env.unwrapped, BrailleEnv):  # goal-conditioned toys have no tactile world
         return
     world = json.loads(json.dumps(env.unwrapped.world))  # as stored: tuples become lists
-    dataset = getattr(env.unwrapped._core.backend, "dataset", None)
-    if dataset is not None:
-        world["samples_sha256"] = dataset.samples_sha256
+    if env.unwrapped.dataset is not None:
+        world["samples_sha256"] = env.unwrapped.dataset.samples_sha256
     path = run_dir / WORLD_FILE
     if path.exists():
         stored = json.loads(path.read_text())

@@ -37,6 +37,8 @@ import numpy as np
 
 from tactile_braille._io import atomic_path
 from tactile_braille._tasks import REGISTERED_TASKS
+from tactile_braille._tasks import official_budget as _official_budget
+from tactile_braille.evaluation.leaderboard import typing_score
 from tactile_braille.evaluation.results import make_result, write_result
 from tactile_braille.evaluation.scoring import TypingReport, evaluate_policy
 
@@ -92,10 +94,11 @@ LABELS = {"dqn": "SB3 DQN + HER", "sac": "SB3 SAC + HER", "td3": "SB3 TD3 + HER"
 
 def official_budget(task: str) -> int:
     """The task's official training budget in environment steps (:mod:`tactile_braille._tasks`)."""
-    for registered in REGISTERED_TASKS:
-        if task in (registered.name, registered.env_id):
-            return registered.budget_steps
-    raise ValueError(f"unknown task {task!r}; choose one of {[t.name for t in REGISTERED_TASKS]}")
+    budget = _official_budget(task)
+    if budget is None:
+        raise ValueError(f"{task!r} is no registered task with an official budget; choose one of "
+                         f"{[t.name for t in REGISTERED_TASKS]}")  # fmt: skip
+    return budget
 
 
 def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None):
@@ -145,8 +148,9 @@ def train(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=N
 
 
 def objective(report: TypingReport) -> float:
-    """What a search maximises: typing accuracy, then (by less than one key's worth) fewer steps."""
-    return report.accuracy - report.total_steps / (report.keys_asked * 25 * 1_000)
+    """What a search maximises: the leaderboard's per-seed :func:`typing_score` (accuracy, then fewer
+    steps)."""
+    return typing_score(report.accuracy, report.total_steps, report.keys_asked)
 
 
 # ------------------------------------------------------------------ the search
@@ -300,21 +304,13 @@ def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=
                         score(model, task, dataset), method=f"{LABELS[algo]} (tuned)", seed=seed,
                         env_steps=tuning["steps"],
                         notes=f"tactile_braille.baselines.sb3; {seconds / 60:.1f} min on one CPU thread",
+                        tuning=tuning,
                     )  # fmt: skip
-                    write_result(_with_tuning(result, tuning), target)
+                    write_result(result, target)
         except LockedError:
             continue  # another process trains this seed
         written.append(target)
     return written
-
-
-def _with_tuning(result: dict, tuning: dict) -> dict:
-    """``result`` with its search recorded under ``tuning``, sealed again (as :func:`make_result` would)."""
-    from tactile_braille.evaluation.results import seal
-
-    content = {name: value for name, value in result.items() if name != "seal"}
-    content["tuning"] = json.loads(json.dumps(tuning, default=_plain))
-    return {**content, "seal": seal(content)}
 
 
 def main(argv=None) -> int:

@@ -112,6 +112,12 @@ class BrailleEnv(gym.Env):
         return {**self._core.backend.describe(), **self._core.rules()}
 
     @property
+    def dataset(self):
+        """The :class:`~tactile_braille.datasets.store.TactileDataset` the observations come from (the
+        ``dataset`` backend's), or None on the others."""
+        return getattr(self._core.backend, "dataset", None)
+
+    @property
     def goal_keys(self) -> tuple[str, ...]:
         """The task's keys, in the order of the goal one-hots."""
         return self._core.goal_keys

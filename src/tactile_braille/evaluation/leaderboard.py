@@ -29,6 +29,7 @@ import gymnasium as gym
 import numpy as np
 
 from tactile_braille._io import atomic_path
+from tactile_braille._tasks import official_budget
 from tactile_braille.agents.registry import agent_label
 from tactile_braille.agents.run import json_differences
 from tactile_braille.envs.core import WORLD_RULES
@@ -236,13 +237,6 @@ def _tasks(results, reference: dict[str, str] | None):
         within = [row for row in held if _within(row, budget)]
         over = [row for row in held if not _within(row, budget)]
         yield task, chosen, within + _paper_rows(task), over, apart
-
-
-def official_budget(task: str) -> int | None:
-    """The task's official training budget in environment steps (None: a task with none)."""
-    from tactile_braille._tasks import REGISTERED_TASKS
-
-    return next((t.budget_steps for t in REGISTERED_TASKS if task in (t.name, t.env_id)), None)
 
 
 def _within(row: Row, budget: int | None) -> bool:

@@ -47,18 +47,19 @@ def make_result(
     env_steps: int | None = None,
     epochs: int | None = None,
     notes: str = "",
+    tuning: dict | None = None,
 ) -> dict:
-    """A results file's content: the report, who made it (``method``: free text), the training
-    ``seed`` and budget (environment steps, and epochs of 250 steps where the method counts them)."""
+    """A results file's content, checked and sealed: the report, who made it (``method``: free text),
+    the training ``seed`` and budget (environment steps, and epochs of 250 steps where the method
+    counts them), and for a method whose settings a search chose, the search (``tuning``: its space,
+    trials and choice; ``trials``, the number finished, is what the leaderboard shows)."""
     if not method.strip():
         raise ValueError("a result needs a method name (free text, e.g. 'SB3 DQN + HER')")
-    for name, value in (("seed", seed), ("env_steps", env_steps), ("epochs", epochs)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
-            raise ValueError(f"{name} must be a non-negative integer or None, got {value!r}")
     result = {
         "format": RESULT_FORMAT, "method": method.strip(), "task": report.task, "track": report.track,
         "seed": seed, "budget": {"env_steps": env_steps, "epochs": epochs}, "notes": notes,
         "fingerprint": report.fingerprint, "project_version": __version__, "report": report.to_dict(),
+        **({"tuning": tuning} if tuning is not None else {}),
     }  # fmt: skip
     result = json.loads(json.dumps(result))  # as it will be read back: tuples as lists, keys as strings
     check_content(result, f"the result of {result['method']}")

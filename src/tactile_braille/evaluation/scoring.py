@@ -390,15 +390,14 @@ def _bound(env: gym.Env, sequences, protocol: str, seed: int) -> float | None:
     """:func:`~tactile_braille.evaluation.bounds.typing_bound` in ``env``'s world (None off the dataset
     backend: the bound is of the paper's simulation; None, with a warning, for a dataset whose grid it cannot
     follow)."""
-    from tactile_braille.envs.backends import DatasetBackend
     from tactile_braille.evaluation.bounds import typing_bound
 
-    backend = env.unwrapped._core.backend
-    if not isinstance(backend, DatasetBackend):
+    dataset = env.unwrapped.dataset
+    if dataset is None:
         return None
     try:
         return typing_bound(
-            env.spec.id, sequences, protocol, seed, dataset=backend.dataset, grid=env.unwrapped.task.grid
+            env.spec.id, sequences, protocol, seed, dataset=dataset, grid=env.unwrapped.task.grid
         )
     except ValueError as error:  # a dataset whose grid the bound cannot follow: score without it
         warnings.warn(f"no typing bound for this evaluation: {error}", stacklevel=3)
