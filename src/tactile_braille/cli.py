@@ -317,8 +317,6 @@ def _train(args: argparse.Namespace) -> int:
     config = _resume_config(args) if args.resume is not None else _train_config(args)
     from tactile_braille.agents.training import train
 
-    if args.resume is None:
-        _check_warm_start(config)
     rig = None
     if args.rig_config is not None or args.simulated_rig:
         rig, _ = _open_ur5(args.rig_config, simulated=args.simulated_rig)
@@ -330,39 +328,6 @@ def _train(args: argparse.Namespace) -> int:
             rig.close()
     print(f"run folder: {run}")
     return 0
-
-
-def _check_warm_start(config, shown: int = 3) -> None:
-    """Refuse a warm start (``--init-from RUN``) from another learner in one short line that leads with
-    the settings that differ: the task and algorithm first (another algorithm's hyperparameters all
-    differ, and go unlisted), at most ``shown`` of them. ``train`` checks the rest of the source."""
-    from tactile_braille.agents.config import differences
-    from tactile_braille.agents.run import CONFIG_FILE, INIT_FREE, read_config
-
-    source = Path(config.init_from) if config.init_from is not None else None
-    if source is None or not (source / CONFIG_FILE).exists():
-        return
-    free = tuple(name for name in INIT_FREE if not name.endswith("."))
-    groups = tuple(name for name in INIT_FREE if name.endswith("."))
-    other = [line for line in differences(read_config(source), config, ignore=free)
-             if not line.startswith(groups)]  # fmt: skip
-    if not other:
-        return
-    if any(line.startswith("algo:") for line in other):
-        other = [line for line in other if not line.startswith("agent.")]
-
-    def rank(line: str) -> tuple[bool, bool]:  # the task and algorithm, other top-level settings, groups
-        name = line.partition(":")[0]
-        return name not in ("algo", "task"), "." in name
-
-    other.sort(key=rank)
-    listed = "; ".join(line if len(line) <= 80 else line[:77] + "..." for line in other[:shown])
-    more = f"; and {len(other) - shown} more" if len(other) > shown else ""
-    raise ValueError(
-        f"--init-from {source} learnt with other settings ({listed}{more}): a warm start may change only "
-        "where and how long it learns (world, seed, length, replay, evaluation, machine); start from a run "
-        "of the same task, algorithm and hyperparameters"
-    )
 
 
 def _resume_config(args: argparse.Namespace):

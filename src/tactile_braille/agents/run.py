@@ -311,23 +311,35 @@ def check_init_from(config: TrainConfig, run_dir: Path) -> None:
     source = Path(config.init_from)
     if not (source / CONFIG_FILE).exists():
         raise ValueError(f"init_from {source}: no training run there (no {CONFIG_FILE})")
-    if not (source / CHECKPOINT_FILE).exists():
-        raise ValueError(f"init_from {source}: the run has no {CHECKPOINT_FILE} to start from")
     if source.resolve() == Path(run_dir).resolve():
         raise ValueError(f"init_from {source} is this run's own folder: resume it instead (--resume)")
-    free = tuple(name for name in INIT_FREE if not name.endswith("."))
-    groups = tuple(name for name in INIT_FREE if name.endswith("."))
-    other = [
-        line for line in differences(read_config(source), config, ignore=free) if not line.startswith(groups)
-    ]
+    other = _init_differences(read_config(source), config)
     if other:
+        listed = "; ".join(line if len(line) <= 80 else line[:77] + "..." for line in other[:3])
+        more = f"; and {len(other) - 3} more" if len(other) > 3 else ""
         raise ValueError(
-            f"init_from {source} learnt with other settings ({'; '.join(other)}); a warm start may change "
-            f"only where and how long it learns ({', '.join(INIT_FREE)})"
+            f"init_from {source} learnt with other settings ({listed}{more}): a warm start may change only "
+            "where and how long it learns (world, seed, length, replay, evaluation, machine); start from a "
+            "run of the same task, algorithm and hyperparameters"
         )
+    if not (source / CHECKPOINT_FILE).exists():
+        raise ValueError(f"init_from {source}: the run has no {CHECKPOINT_FILE} to start from")
     _source_checkpoint(source, "cpu")
     if not (source / PROGRESS_FILE).exists():
         raise ValueError(f"init_from {source}: the run has no {PROGRESS_FILE}")
+
+
+def _init_differences(source: TrainConfig, config: TrainConfig) -> list[str]:
+    """The settings in which a warm start's source differs from it beyond :data:`INIT_FREE`, the task
+    and algorithm first, then other top-level settings, then grouped ones (another algorithm's
+    hyperparameters all differ: they go unlisted)."""
+    free = tuple(name for name in INIT_FREE if not name.endswith("."))
+    groups = tuple(name for name in INIT_FREE if name.endswith("."))
+    other = [line for line in differences(source, config, ignore=free) if not line.startswith(groups)]
+    if any(line.startswith("algo:") for line in other):
+        other = [line for line in other if not line.startswith("agent.")]
+    return sorted(other, key=lambda line: (line.partition(":")[0] not in ("algo", "task"),
+                                           "." in line.partition(":")[0]))  # fmt: skip
 
 
 def _source_checkpoint(source: Path, device) -> dict:
