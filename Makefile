@@ -86,6 +86,7 @@ results: $(STAMP)
 		--notes docs/results-notes.md --output docs/results.md \
 		--title "Results: Table III with the paper's settings, the released code's and ours"
 	$(TB) leaderboard $(RANKED) $(RESULT_FILES) --output docs/leaderboard.md --headline README.md \
+		--figure docs/images/leaderboard_profiles.png \
 		--title "Leaderboard: typing on the braille keyboard"
 
 clean:

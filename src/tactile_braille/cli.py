@@ -531,6 +531,7 @@ def _leaderboard(args: argparse.Namespace) -> int:
         headline_markdown,
         leaderboard_markdown,
         load_results,
+        plot_performance_profiles,
         write_headline,
     )
 
@@ -542,8 +543,16 @@ def _leaderboard(args: argparse.Namespace) -> int:
         reference[task] = fingerprint
     if args.output is not None and args.output.is_dir():
         raise ValueError(f"--output {args.output} is a folder; name the page to write (e.g. leaderboard.md)")
+    if args.figure is not None and (args.output is None or args.figure.is_dir()):
+        raise ValueError(f"--figure {args.figure}: name the PNG to write, with --output (the page links it)")
     results = load_results(args.results)
     page = leaderboard_markdown(results, title=args.title, reference=reference, strict=args.strict)
+    if args.figure is not None:
+        args.figure.parent.mkdir(parents=True, exist_ok=True)
+        if plot_performance_profiles(results, args.figure, reference) is not None:
+            link = Path(os.path.relpath(args.figure.resolve(), args.output.resolve().parent)).as_posix()
+            page = leaderboard_markdown(results, args.title, reference, args.strict, figure=link)
+            print(f"wrote {args.figure}")
     if args.headline is not None:
         write_headline(args.headline, headline_markdown(results, reference))
         print(f"wrote the headline table into {args.headline}")
@@ -857,6 +866,13 @@ def _add_evaluate_command(commands) -> None:
         "registered environment comes hold: the paper's protocol, the default world)",
     )
     board.add_argument("--strict", action="store_true", help="refuse results under other conditions")
+    board.add_argument(
+        "--figure",
+        type=Path,
+        metavar="PNG",
+        help="also draw each task's performance profiles (the share of seeds typing above each accuracy) "
+        "into PNG, shown on the page (needs --output)",
+    )
     board.add_argument(
         "--headline",
         type=Path,

@@ -584,6 +584,15 @@ def test_cli_scores_a_callable_and_ranks_it(env_datasets, tmp_path, capsys):
     page = tmp_path / "board.md"
     assert main(["leaderboard", str(output), "--output", str(page)]) == 0
     assert "| 1 | always press | tactile | 1 |" in page.read_text()
+    # The performance profiles: drawn, and linked from the page relative to it.
+    figure = tmp_path / "images" / "profiles.png"
+    assert main(["leaderboard", str(output), "--output", str(page), "--figure", str(figure)]) == 0
+    assert figure.read_bytes().startswith(b"\x89PNG") and "![performance profiles](images/profiles.png)" in (
+        page.read_text()
+    )
+    for bad in (["--figure", str(figure)], ["--output", str(page), "--figure", str(tmp_path)]):
+        assert main(["leaderboard", str(output), *bad]) == 2
+        assert "--figure" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

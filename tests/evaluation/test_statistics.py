@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 from scipy.stats import mannwhitneyu
 
-from tactile_braille.evaluation.statistics import bootstrap_interval, iqm, probability_of_improvement
+from tactile_braille.evaluation.statistics import (
+    bootstrap_interval,
+    iqm,
+    performance_profile,
+    probability_of_improvement,
+)
 
 
 def test_the_bootstrap_interval_brackets_the_mean_and_shrinks_with_more_data():
@@ -46,3 +51,24 @@ def test_the_probability_of_improvement_counts_pairs_and_ties_half():
     rng = np.random.default_rng(3)
     x, y = rng.integers(0, 4, 7).astype(float), rng.integers(0, 4, 5).astype(float)
     assert probability_of_improvement(x, y)[0] == pytest.approx(mannwhitneyu(x, y).statistic / 35)
+
+
+def test_the_performance_profile_is_the_share_above_each_threshold_each_task_weighing_the_same():
+    # Task 1: 1 of 4 runs above 0.9; task 2: 2 of 2. The profile at 0.9 is (1/4 + 2/2) / 2, not 3/6.
+    tasks = [[0.5, 0.7, 0.9, 1.0], [0.95, 1.0]]
+    share, low, high = performance_profile(tasks, [0.0, 0.9, 0.99, 1.0])
+    assert share.tolist() == pytest.approx([1.0, (1 / 4 + 1) / 2, (1 / 4 + 1 / 2) / 2, 0.0])
+    assert np.all(low <= share) and np.all(share <= high) and np.all((low >= 0) & (high <= 1))
+    assert low[1] < share[1] < high[1]  # task 1's runs are uncertain about 0.9
+    assert (low[0], high[0], low[3], high[3]) == (1.0, 1.0, 0.0, 0.0)  # every run above 0, none above 1
+    # Stratified: no resampling moves runs between tasks, so task 2's certain share keeps the bound.
+    assert low[1] >= 0.5
+    # Non-increasing in the threshold, strict '>' at a run's own score.
+    grid = np.linspace(0, 1, 101)
+    assert np.all(np.diff(performance_profile(tasks, grid)[0]) <= 0)
+    assert performance_profile([[0.9]], [0.9])[0].tolist() == [0.0]
+    one = performance_profile([[0.9], [0.2]], [0.5])
+    assert [v.tolist() for v in one] == [[0.5], [0.5], [0.5]]  # one run a task: nothing to resample
+    assert np.array_equal(performance_profile(tasks, grid)[1], performance_profile(tasks, grid)[1])
+    with pytest.raises(ValueError, match="at least one run of each task"):
+        performance_profile([[1.0], []], [0.5])

@@ -35,7 +35,12 @@ from tactile_braille.agents.run import json_differences
 from tactile_braille.envs.core import WORLD_RULES
 from tactile_braille.evaluation.report import PAPER_TABLE, TASK_NAMES, TRACK_TITLES
 from tactile_braille.evaluation.results import check_result, read_result
-from tactile_braille.evaluation.statistics import bootstrap_interval, iqm, probability_of_improvement
+from tactile_braille.evaluation.statistics import (
+    bootstrap_interval,
+    iqm,
+    performance_profile,
+    probability_of_improvement,
+)
 
 PAPER_METHOD = "Church et al. 2020, Table III (sim)"
 
@@ -175,10 +180,14 @@ def leaderboard_markdown(
     title: str = "Leaderboard",
     reference: dict[str, str] | None = None,
     strict: bool = False,
+    figure: str | None = None,
 ) -> str:
     """The leaderboard page (the module docstring). ``reference``: task -> fingerprint (or a prefix of
-    one, as the page shows them) to rank under."""
+    one, as the page shows them) to rank under; ``figure``: where the page finds the performance profiles
+    (:func:`plot_performance_profiles`), relative to it, shown under the introduction."""
     lines = [f"# {title}", "", _INTRO, ""]
+    if figure is not None:
+        lines += [_PROFILES_CAPTION, "", f"![performance profiles]({figure})", ""]
     for task, chosen, ranked, over, apart in _tasks(results, reference):
         if strict and apart:
             where = next(w for w, r in results if r["task"] == task and r["fingerprint"] != chosen)
@@ -348,16 +357,22 @@ def _budget(row: Row) -> str:
     return f"{np.mean(budget):,.0f}" if budget else "-"
 
 
-def _statistics(ranked: list[Row]) -> list[str]:
-    """The field's statistics for a task's best methods: the interquartile mean of each one's accuracy
-    over its seeds with a bootstrap interval, and the probability that our best ``tactile`` method
-    types better than the best other method (rliable's definitions, computed with SciPy)."""
+def _tops(ranked: list[Row]) -> dict[str, Row]:
+    """A task's best methods, as its statistics compare them: our best on each track, the best other."""
     best = {
         "ours, tactile": [r for r in ranked if r.method.startswith(OURS) and r.track == "tactile"],
         "ours, proprio": [r for r in ranked if r.method.startswith(OURS) and r.track == "proprio"],
         "best other": [r for r in ranked if not r.paper and not r.method.startswith(OURS)],
     }
-    tops = {name: min(rows, key=Row.rank_key) for name, rows in best.items() if rows}
+    return {name: min(rows, key=Row.rank_key) for name, rows in best.items() if rows}
+
+
+def _statistics(ranked: list[Row]) -> list[str]:
+    """The field's statistics for a task's best methods (:func:`_tops`): the interquartile mean of each
+    one's accuracy over its seeds with a bootstrap interval, and the probability that our best
+    ``tactile`` method types better than the best other method (rliable's definitions, computed with
+    SciPy)."""
+    tops = _tops(ranked)
     if not tops:
         return []
     lines = ["Statistics (interquartile mean over seeds, 95 % percentile-bootstrap interval):", ""]
@@ -371,6 +386,67 @@ def _statistics(ranked: list[Row]) -> list[str]:
         lines.append(f"- probability of improvement, ours (`tactile`) over the best other method: "
                      f"{value:.2f} [{low:.2f}, {high:.2f}] (per seed: accuracy, then steps)")  # fmt: skip
     return [*lines, ""]
+
+
+PROFILE_FROM = 0.8
+"""The lowest accuracy threshold the profiles show (where the methods differ); a method whose seeds all
+type below it lies at 0."""
+
+PROFILE_COLOURS = {"ours, tactile": "tab:blue", "ours, proprio": "tab:green", "best other": "tab:orange"}
+
+_PROFILES_CAPTION = (
+    "Performance profiles (rliable's): for each task's best methods within its official budget (ours on "
+    "each track, the best other method), the share of training seeds whose typing accuracy is above each "
+    "threshold, with a 95 % percentile-bootstrap band; a curve further up and to the right types better "
+    "more reliably; thresholds from 0.8 up, where the best methods differ (a method whose seeds all type "
+    "below 0.8 lies at 0). The paper's typing accuracy is the dashed line."
+)
+
+
+def plot_performance_profiles(
+    results: list[tuple[str, dict]], path: str | Path, reference: dict[str, str] | None = None
+) -> Path | None:
+    """A panel per task: the performance profile (:func:`~tactile_braille.evaluation.statistics.
+    performance_profile`) of the typing accuracy of the task's best methods ranked within its official
+    budget (those its statistics compare), the paper's accuracy beside them. None (nothing written)
+    without ranked methods."""
+    from matplotlib.lines import Line2D
+
+    from tactile_braille._figures import new_figure, save_figure
+
+    panels = [(task, _tops(ranked), [r for r in ranked if r.paper])
+              for task, _, ranked, _, _ in _tasks(results, reference)]  # fmt: skip
+    panels = [panel for panel in panels if panel[1]]
+    if not panels:
+        return None
+    columns = min(len(panels), 2)
+    rows = int(np.ceil(len(panels) / columns))
+    fig, axes = new_figure(rows, columns, figsize=(5.2 * columns, 2.9 * rows + 0.6))
+    taus = np.linspace(PROFILE_FROM, 1.0, 201)
+    for ax, (task, tops, paper) in zip(axes.ravel(), panels, strict=False):
+        for name, row in tops.items():
+            share, low, high = performance_profile([row.accuracy], taus)
+            colour = PROFILE_COLOURS[name]
+            count = len(row.accuracy)
+            label = f"{name}: {row.method.removeprefix(OURS)} ({count} seed{'s' if count > 1 else ''})"
+            ax.step(taus, share, where="post", color=colour, label=_short(label, 70), lw=1.4)
+            ax.fill_between(taus, low, high, step="post", color=colour, alpha=0.15, lw=0)
+        for row in paper:
+            if row.accuracy[0] >= PROFILE_FROM:
+                ax.axvline(row.accuracy[0], color="red", ls="--", lw=0.8)
+        ax.set_xlim(PROFILE_FROM, 1.0)
+        ax.set_ylim(-0.03, 1.03)
+        ax.set_title(task, fontsize=9)
+        ax.set_xlabel("typing accuracy threshold", fontsize=8)
+        ax.set_ylabel("share of seeds above it", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=6, loc="lower left", frameon=False)
+    for ax in axes.ravel()[len(panels) :]:
+        ax.axis("off")
+    fig.legend(handles=[Line2D([], [], color="red", ls="--", lw=0.8, label="the paper's Table III")],
+               loc="lower center", fontsize=7, frameon=False)  # fmt: skip
+    fig.tight_layout(rect=(0, 0.3 / fig.get_figheight() + 0.01, 1, 1))
+    return save_figure(fig, path)
 
 
 def _mean(values, digits: int) -> str:

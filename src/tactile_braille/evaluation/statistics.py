@@ -4,6 +4,8 @@
 4.5
 >>> probability_of_improvement([1.0, 0.5], [0.5, 0.2])[0]
 0.875
+>>> performance_profile([[0.5, 1.0], [1.0, 1.0]], [0.0, 0.9, 1.0])[0].tolist()
+[1.0, 0.75, 0.0]
 
 Values that are None or not finite (a run that never reached a threshold) are left out; the
 intervals are percentile bootstraps, seeded so that a page regenerates identically.
@@ -73,3 +75,44 @@ def _pairs_won(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
     (the bootstrap's resamples stacked on the others)."""
     a, b = np.moveaxis(a, axis, -1)[..., :, None], np.moveaxis(b, axis, -1)[..., None, :]
     return (a > b).mean(axis=(-2, -1)) + 0.5 * (a == b).mean(axis=(-2, -1))
+
+
+def performance_profile(
+    scores_by_task, thresholds, confidence: float = 0.95
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """rliable's performance profile: at each threshold tau, the share of runs scoring above tau
+    (``score > tau``), each task weighing the same (its runs' share, averaged over the tasks), with a
+    stratified percentile-bootstrap interval (``scipy.stats.bootstrap``: each task's runs resampled
+    apart, one sample per task).
+
+    Args:
+        scores_by_task: per task, its runs' scores (one list of one task: that task's profile).
+        thresholds: the taus.
+        confidence: the interval's level.
+
+    Returns:
+        (shares, low, high), each an array over ``thresholds``; an interval collapses to its value
+        where every task has one run.
+    """
+    from scipy.stats import bootstrap
+
+    taus = np.asarray(thresholds, dtype=float)
+    samples = [_finite(scores) for scores in scores_by_task]
+    if not samples or any(s.size == 0 for s in samples):
+        raise ValueError("a performance profile needs at least one run of each task")
+
+    def shares(*runs, axis=-1):
+        # Each task's runs (..., n) -> the share above each tau, (taus, ...); their mean over the tasks.
+        return np.mean(
+            [(np.moveaxis(r, axis, -1)[None] > taus.reshape(-1, *[1] * np.ndim(r))).mean(-1) for r in runs],
+            axis=0,
+        )
+
+    value = shares(*samples)
+    if all(s.size < 2 for s in samples):
+        return value, value.copy(), value.copy()
+    result = bootstrap(samples, shares, n_resamples=RESAMPLES, confidence_level=confidence, paired=False,
+                       method="percentile", rng=np.random.default_rng(0))  # fmt: skip
+    low, high = result.confidence_interval
+    # A resampling where every draw agrees gives NaN bounds in SciPy; the share is then certain.
+    return value, np.where(np.isnan(low), value, low), np.where(np.isnan(high), value, high)
