@@ -16,6 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 TINY = {
+    "adam_epsilon.py": ["--updates", "2"],
     "activation_map.py": [],
     "all_goals_cost.py": ["--updates", "2", "--rounds", "1"],
     "classifier_robustness.py": ["--epochs", "1", "--per-key", "2"],

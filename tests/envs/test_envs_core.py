@@ -371,6 +371,29 @@ def test_press_on_every_key_cell_terminates_with_that_key(env_id, backend, make)
         assert info["is_success"] == (key == info["goal_key"])
 
 
+@pytest.mark.parametrize("env_id", DISCRETE_IDS)
+def test_a_discrete_cell_shows_one_of_the_datasets_taps_of_its_key_drawn_anew_at_each_tap(env_id, make):
+    """The released simulator's rule: a tap on a cell shows one of the stored jittered taps of the key
+    under it (of a NONE tap on a NONE cell), drawn at random each time, not one image per cell."""
+    from tactile_braille.datasets.store import load_dataset
+
+    env = make(env_id)
+    dataset = load_dataset(env.unwrapped.dataset.path)
+    labels, stored = dataset.label_names(), dataset.observations
+    grid = env.unwrapped.task.key_grid
+    cells = {str(grid[r, c]): (r, c) for r in range(grid.shape[0]) for c in range(grid.shape[1])}
+    for key, cell in sorted(cells.items()):
+        taps = stored[labels == key]
+        assert len(taps) == 3  # the test datasets' taps per key
+        seen = []
+        for i in range(24):
+            _reset_at_cell(env, cell, seed=i)
+            image = env.step(PRESS)[0]["observation"][..., 0]  # a press shows the key's taps too
+            seen += [j for j, tap in enumerate(taps) if np.array_equal(tap, image)]
+        assert len(seen) == 24, f"{key}: a tap showed an image that is not one of its stored taps"
+        assert set(seen) == {0, 1, 2}, f"{key}: drawn anew at each tap, not fixed per cell"
+
+
 @pytest.mark.parametrize("backend", SIMULATED_BACKENDS)
 @pytest.mark.parametrize("env_id", DISCRETE_IDS)
 def test_press_on_a_none_cell_does_not_terminate(env_id, backend, make):
