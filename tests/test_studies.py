@@ -172,3 +172,25 @@ def test_planner_traces_scores_the_reader_and_the_refit_labels_against_the_taps_
     assert both["episodes"][96:] == second["episodes"]
     first = np.mean([goal == typed for goal, typed, *_ in both["episodes"][:96]])
     assert both["accuracy"] == pytest.approx((first + second["accuracy"]) / 2)
+
+
+def test_alphabet_gap_reads_each_groups_seeds_and_draws_their_mean_beside_the_releases_log(
+    env_datasets, tmp_path, capsys
+):
+    script = _load("alphabet_gap")
+    for seed in (0, 1):
+        config = TrainConfig(task=ARROWS, algo="dqn", seed=seed, epochs=2, steps_per_epoch=30, start_steps=20,
+                             threads=1, dataset=str(env_datasets[ARROWS]),
+                             agent=DQNConfig(hidden=(16,), batch_size=8),
+                             evaluation={"test_episodes": 2})  # fmt: skip
+        train(config, run_dir=tmp_path / f"tiny_{seed}", progress=False)
+    figure = tmp_path / "gap.png"
+    assert script.main([f"tiny={tmp_path}/tiny_*", "--figure", str(figure)]) == 0
+    out = capsys.readouterr().out
+    assert "tiny (2 seeds, 2 epochs)" in out and "per seed (95 % of best / 0.95): 0: " in out
+    assert "the release's logged run: first 95 % of its best at epoch 36" in out
+    assert figure.read_bytes().startswith(b"\x89PNG")
+    with pytest.raises(SystemExit, match="no folder matches"):
+        script.main([f"none={tmp_path}/nothing_*"])
+    with pytest.raises(SystemExit, match="a group is LABEL=GLOB"):
+        script.main(["no pattern"])
