@@ -47,3 +47,6 @@ tuned() {  # TASK ALGO TRIALS
 }
 tuned DiscreteArrows-v0 dqn 16
 tuned DiscreteAlphabet-v0 dqn 12
+tuned DiscreteArrows-v0 qrdqn 16
+tuned ContinuousArrows-v0 sac 12
+tuned ContinuousArrows-v0 tqc 12

@@ -43,3 +43,29 @@ def test_the_protocol_refuses_to_tune_on_reported_seeds_or_report_tuning_seeds(t
     with pytest.raises(FileNotFoundError, match="no study at"):
         sb3.run_seeds("DiscreteArrows-v0", "dqn", tmp_path, [0], tmp_path / "out")
     assert [sb3.official_budget(task) for task in ("DiscreteArrows-v0", ARROWS)] == [6_250, 6_250]
+
+
+def test_each_algorithm_is_refused_on_the_other_kind_of_actions_before_any_study_is_made(tmp_path):
+    assert sb3.ACTIONS.keys() == sb3.DEFAULTS.keys() == sb3.SEARCH_SPACES.keys() == sb3.LABELS.keys()
+    for algo, kind in sb3.ACTIONS.items():
+        task = "DiscreteArrows-v0" if kind == "continuous" else "ContinuousArrows-v0"
+        with pytest.raises(ValueError, match=f"{algo} takes {kind} actions; {task}'s are "):
+            sb3.tune(task, algo, 1, tmp_path / "study")
+        assert {name for name in sb3.SEARCH_SPACES[algo]} <= set(sb3.DEFAULTS[algo])
+    with pytest.raises(ValueError, match="algo must be one of"):
+        sb3.tune("DiscreteArrows-v0", "crossq", 1, tmp_path / "study")
+    assert not (tmp_path / "study").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("algo", "task"), [("qrdqn", ARROWS), ("tqc", "tactile_braille/ContinuousArrows-v0")]
+)
+def test_the_contrib_algorithms_learn_with_her_and_type(env_datasets, algo, task):
+    """SB3-Contrib's QR-DQN and TQC train on the images and goals with SB3's HER buffer, and type."""
+    name = task.removeprefix("tactile_braille/")
+    settings = {**sb3.DEFAULTS[algo], "learning_starts": 30, "batch_size": 8}
+    model, _ = sb3.train(name, algo, settings, 80, seed=0, dataset=env_datasets[task])
+    assert type(model).__module__.startswith("sb3_contrib") and model.num_timesteps == 80
+    report = sb3.score(model, name, env_datasets[task])
+    assert 0.0 <= report.accuracy <= 1.0 and report.total_steps >= report.keys_asked

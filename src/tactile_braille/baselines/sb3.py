@@ -1,8 +1,9 @@
 """Stable-Baselines3 with Hindsight Experience Replay, tuned by the benchmark's protocol.
 
 The agents are SB3's own (DQN on the discrete tasks; SAC and TD3 on the
-continuous ones) with its ``HerReplayBuffer``, on the environment exactly as
-registered (the ``tactile`` track), scored by
+continuous ones) and SB3-Contrib's (QR-DQN; TQC), with SB3's
+``HerReplayBuffer``, on the environment exactly as registered (the ``tactile``
+track), scored by
 :func:`~tactile_braille.evaluation.evaluate_policy`. The protocol every method
 on the leaderboard gets (docs/benchmark.md#the-tuning-protocol):
 
@@ -52,11 +53,27 @@ DEFAULTS: dict[str, dict] = {
             "goal_selection_strategy": "future", "n_sampled_goal": 4},
     "td3": {"learning_rate": 1e-3, "gamma": 0.99, "batch_size": 64, "learning_starts": 1_000, "tau": 0.005,
             "goal_selection_strategy": "future", "n_sampled_goal": 4},
+    "qrdqn": {"learning_rate": 5e-5, "gamma": 0.99, "batch_size": 32, "train_freq": 1, "gradient_steps": 1,
+              "learning_starts": 1_000, "target_update_interval": 500, "exploration_fraction": 0.3,
+              "exploration_final_eps": 0.05, "goal_selection_strategy": "future", "n_sampled_goal": 4},
+    "tqc": {"learning_rate": 3e-4, "gamma": 0.99, "batch_size": 64, "learning_starts": 1_000, "tau": 0.005,
+            "top_quantiles_to_drop_per_net": 2, "goal_selection_strategy": "future", "n_sampled_goal": 4},
 }  # fmt: skip
-"""Each algorithm's settings before any search: SB3's defaults, but for a learning start, a target
-network, an exploration decay and an update every step that fit these budgets (DQN) and batches of
-64 (SAC, TD3), as the untuned rows of the leaderboard ran (``examples/sb3_her.py``). The image
-network is shared by the actor and critics (``share_features_extractor``) in SAC and TD3."""
+"""Each algorithm's settings before any search: the library's defaults, but for a learning start, a
+target network, an exploration decay and an update every step that fit these budgets (DQN, QR-DQN)
+and batches of 64 (SAC, TD3, TQC), as the untuned rows of the leaderboard ran
+(``examples/sb3_her.py``). The image network is shared by the actor and critics
+(``share_features_extractor``) in SAC, TD3 and TQC. SB3-Contrib's CrossQ takes vector observations
+only (its one policy is ``MlpPolicy``), not the tasks' images with goals, so it is not among them."""
+
+ACTIONS = {
+    "dqn": "discrete",
+    "qrdqn": "discrete",
+    "sac": "continuous",
+    "td3": "continuous",
+    "tqc": "continuous",
+}
+"""The kind of action each algorithm takes."""
 
 Choice = tuple
 """A categorical dimension of a search space: its values."""
@@ -87,9 +104,19 @@ SEARCH_SPACES: dict[str, dict[str, Range | Choice]] = {
     "td3": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
             "batch_size": Choice((64, 128)), "learning_starts": Choice((200, 500, 1_000)),
             "tau": Choice((0.005, 0.01, 0.02)), **_HER},
+    "qrdqn": {"learning_rate": Range(5e-5, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
+              "batch_size": Choice((32, 64)), "train_freq": Choice((1, 4)), "gradient_steps": Choice((1, 2)),
+              "learning_starts": Choice((200, 500, 1_000)),
+              "target_update_interval": Choice((100, 250, 500, 1_000)),
+              "exploration_fraction": Range(0.1, 0.5), "exploration_final_eps": Choice((0.02, 0.05, 0.1)),
+              **_HER},
+    "tqc": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
+            "batch_size": Choice((64, 128)), "learning_starts": Choice((200, 500, 1_000)),
+            "tau": Choice((0.005, 0.01, 0.02)), "top_quantiles_to_drop_per_net": Choice((0, 2, 5)), **_HER},
 }  # fmt: skip
 """What a search may change, per algorithm (the HER goal strategy and count for all)."""
-LABELS = {"dqn": "SB3 DQN + HER", "sac": "SB3 SAC + HER", "td3": "SB3 TD3 + HER"}
+LABELS = {"dqn": "SB3 DQN + HER", "sac": "SB3 SAC + HER", "td3": "SB3 TD3 + HER",
+          "qrdqn": "SB3-Contrib QR-DQN + HER", "tqc": "SB3-Contrib TQC + HER"}  # fmt: skip
 
 
 def official_budget(task: str) -> int:
@@ -101,20 +128,40 @@ def official_budget(task: str) -> int:
     return budget
 
 
-def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None):
-    """An SB3 model of ``algo`` with ``settings`` (:data:`DEFAULTS`' names) on ``task``, its replay
-    holding the whole run."""
-    from stable_baselines3 import DQN, SAC, TD3, HerReplayBuffer
-
+def check_algo(task: str, algo: str) -> None:
+    """Refuse an algorithm this module does not run, or one that cannot act in the task's actions."""
     if algo not in DEFAULTS:
         raise ValueError(f"algo must be one of {sorted(DEFAULTS)}, got {algo!r}")
+    official_budget(task)  # a registered task
+    kind = "continuous" if task.removeprefix("tactile_braille/").startswith("Continuous") else "discrete"
+    if ACTIONS[algo] != kind:
+        able = sorted(a for a, k in ACTIONS.items() if k == kind)
+        raise ValueError(f"{algo} takes {ACTIONS[algo]} actions; {task}'s are {kind}: use one of {able}")
+
+
+def _model_class(algo: str):
+    if algo in ("qrdqn", "tqc"):
+        from sb3_contrib import QRDQN, TQC
+
+        return {"qrdqn": QRDQN, "tqc": TQC}[algo]
+    from stable_baselines3 import DQN, SAC, TD3
+
+    return {"dqn": DQN, "sac": SAC, "td3": TD3}[algo]
+
+
+def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None):
+    """An SB3 (or SB3-Contrib) model of ``algo`` with ``settings`` (:data:`DEFAULTS`' names) on ``task``,
+    its replay holding the whole run."""
+    from stable_baselines3 import HerReplayBuffer
+
+    check_algo(task, algo)
     settings = {**DEFAULTS[algo], **settings}
     her = {name: settings.pop(name) for name in ("goal_selection_strategy", "n_sampled_goal")}
     settings["learning_starts"] = min(settings["learning_starts"], steps)
-    if algo != "dqn":
+    if ACTIONS[algo] == "continuous":
         settings["policy_kwargs"] = {"share_features_extractor": True}
     env = gym.make(f"tactile_braille/{task}", **({"dataset": str(dataset)} if dataset else {}))
-    model_class = {"dqn": DQN, "sac": SAC, "td3": TD3}[algo]
+    model_class = _model_class(algo)
     return model_class(
         "MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=her,
         buffer_size=max(steps, 1), seed=seed, device="cpu", verbose=0, **settings,
@@ -189,6 +236,7 @@ def tune(task: str, algo: str, trials: int, study_dir: Path, seed: int = TUNING_
     budget: another is refused."""
     import optuna
 
+    check_algo(task, algo)
     if seed not in TUNING_SEEDS:
         raise ValueError(
             f"a search trains on tuning seeds ({TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]}), got {seed}"
@@ -242,7 +290,7 @@ def summary(study, task: str, algo: str) -> dict:
     space = {name: {"range": [dim.low, dim.high], "log": dim.log} if isinstance(dim, Range)
              else {"choice": list(dim)} for name, dim in SEARCH_SPACES[algo].items()}  # fmt: skip
     return {
-        "library": "stable-baselines3",
+        "library": "sb3-contrib" if algo in ("qrdqn", "tqc") else "stable-baselines3",
         "algo": algo,
         "task": task,
         "search": "optuna TPE, median pruning",
