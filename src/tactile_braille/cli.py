@@ -853,6 +853,10 @@ def _add_evaluate_command(commands) -> None:
         "--seed", type=int, default=0, help="seed of the start poses (part of the fingerprint)"
     )
     evaluate.set_defaults(handler=_evaluate)
+
+
+def _add_leaderboard_command(commands) -> None:
+    """The ``leaderboard`` command."""
     board = commands.add_parser("leaderboard", help="rank results files per task and track (a markdown page)")
     board.add_argument("results", nargs="+", type=Path, metavar="RESULT", help="results files or run folders")
     board.add_argument("--output", type=Path, help="the page to write (default: print it)")
@@ -1030,6 +1034,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_train_command(commands)
     _add_report_command(commands)
     _add_evaluate_command(commands)
+    _add_leaderboard_command(commands)
     _add_archive_command(commands)
     _add_sweep_command(commands)
     _add_benchmark_command(commands)
