@@ -185,3 +185,23 @@ def test_sweep_takes_the_train_commands_settings_under_a_variant_name(tmp_path, 
     calls.pop()
     assert len(calls) == 1  # nothing ran after a refusal
     assert not (tmp_path / "runs").exists()
+
+
+def test_collect_takes_the_perturbations_bounds_and_records_them(tmp_path, capsys):
+    """A dataset of one unperturbed tap per key (the discrete world with one image per key)."""
+    from tactile_braille.datasets.store import load_dataset
+    from tactile_braille.keyboard.layout import KeyboardLayout
+
+    output = tmp_path / "fixed.h5"
+    argv = ["collect", "--keys", "arrows", "--per-key", "2", "--position-range-mm", "0", "--depth-range-mm",
+            "-0.5", "-0.5", "--yaw-range-deg", "0", "--output", str(output)]  # fmt: skip
+    assert main(argv) == 0 and f"wrote {output}: 10 taps" in capsys.readouterr().out
+    dataset = load_dataset(output)
+    procedure = dataset.metadata.procedure
+    assert (procedure["position_range_mm"], procedure["depth_range_mm"], procedure["yaw_range_deg"]) == (
+        0.0, [-0.5, -0.5], 0.0
+    )  # fmt: skip
+    layout, labels = KeyboardLayout(), dataset.label_names()
+    for key in ("UP", "DOWN", "LEFT", "RIGHT"):
+        poses = dataset.poses[labels == key]
+        assert poses.tolist() == [[*layout.centre_mm(key), 4.5, 0.0]] * 2

@@ -32,6 +32,8 @@ CASES = {
     "train --epochs 1e30": (["train", "DiscreteArrows-v0", "--epochs", "1e30", "--run-dir", "{tmp}/run"],
                             "invalid int value: '1e30'"),
     "collect --seed -1": (["collect", "--seed", "-1", "--output", "{tmp}/c.h5"], "must be a non-negative"),
+    "collect --yaw-range-deg -5": (["collect", "--yaw-range-deg", "-5", "--output", "{tmp}/c.h5"],
+                                   "yaw_range_deg must be a bound >= 0, got -5.0"),
     "data --seed -1": (["data", "--seed", "-1"], "must be a non-negative integer, got -1"),
     "classify --threads 0": (["classify", "--threads", "0"], "must be a positive integer, got 0"),
     "classify into an existing folder": (["classify", "--output", "{tmp}"], "exists; choose another folder"),

@@ -231,7 +231,12 @@ def _collect(args: argparse.Namespace) -> int:
     from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps
 
     if args.procedure == "perturbed":
-        procedure = PerturbedTaps(keys=args.keys, per_key=args.per_key, split=args.split, seed=args.seed)
+        jitter = {name: value for name, value in (("position_range_mm", args.position_range_mm),
+                  ("depth_range_mm", args.depth_range_mm and tuple(args.depth_range_mm)),
+                  ("yaw_range_deg", args.yaw_range_deg)) if value is not None}  # fmt: skip
+        procedure = PerturbedTaps(
+            keys=args.keys, per_key=args.per_key, split=args.split, seed=args.seed, **jitter
+        )
     else:
         if args.keys == "all":
             raise ValueError("a grid covers one task's work frame: choose --keys alphabet or --keys arrows")
@@ -692,6 +697,22 @@ def _add_collect_command(commands) -> None:
     )
     collect.add_argument("--per-key", type=int, default=100, help="perturbed: taps per key")
     collect.add_argument("--split", choices=("train", "validation"), default="train")
+    collect.add_argument(
+        "--position-range-mm",
+        type=float,
+        default=None,
+        help="perturbed: x and y drawn within +- this of each key's centre (the paper's 1)",
+    )
+    collect.add_argument(
+        "--depth-range-mm",
+        type=float,
+        nargs=2,
+        default=None,
+        metavar=("LOW", "HIGH"),
+        help="perturbed: the tap depth's offset from 5 mm, drawn in [LOW, HIGH] (the paper's -1 0)",
+    )
+    collect.add_argument("--yaw-range-deg", type=float, default=None,
+                         help="perturbed: the sensor turned within +- this (the paper's 10)")  # fmt: skip
     collect.add_argument("--spacing-mm", type=float, default=None, help="grid: x/y step (paper's)")
     collect.add_argument("--depth-step-mm", type=float, default=None, help="grid: depth step (paper's)")
     collect.set_defaults(handler=_collect)

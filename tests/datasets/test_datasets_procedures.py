@@ -168,6 +168,9 @@ def test_perturbed_out_of_range_index_raises_index_error(kb, index):
         ({"per_key": 0}, "per_key"),
         ({"per_key": -3}, "per_key"),
         ({"split": "test"}, "split"),
+        ({"position_range_mm": -1.0}, "position_range_mm must be a bound >= 0, got -1.0"),
+        ({"yaw_range_deg": float("nan")}, "yaw_range_deg must be a bound >= 0, got nan"),
+        ({"depth_range_mm": (0.0, -1.0)}, r"depth_range_mm must be \(low, high\) with low <= high"),
     ],
 )
 def test_perturbed_invalid_arguments_raise_value_error(kwargs, match):

@@ -81,6 +81,15 @@ class PerturbedTaps:
             raise ValueError(f"per_key must be at least 1, got {self.per_key}")
         if self.split not in SPLIT_SEED_OFFSET:
             raise ValueError(f"split must be one of {sorted(SPLIT_SEED_OFFSET)}, got {self.split!r}")
+        for name in ("position_range_mm", "yaw_range_deg"):
+            if not getattr(self, name) >= 0:  # NaN too
+                raise ValueError(f"{name} must be a bound >= 0, got {getattr(self, name)}")
+        low, high = self.depth_range_mm
+        if not low <= high:
+            raise ValueError(
+                f"depth_range_mm must be (low, high) with low <= high, got {self.depth_range_mm}"
+            )
+        object.__setattr__(self, "depth_range_mm", (float(low), float(high)))  # a list, as JSON gives it
 
     @property
     def name(self) -> str:
