@@ -7,9 +7,10 @@ test return of 0.95, their means with a 95 % bootstrap interval, the mean test r
 epochs and the typing after the last epoch (the paper's protocol); then the release's logged run of the
 same agent. With ``--figure`` it draws the groups' mean test return per epoch (a five-epoch running
 mean) beside the release's log. Without groups it reads the committed records of the study
-(docs/notes/alphabet-gap.md).
+(docs/notes/alphabet-gap.md). ``--offsets`` also generates the discrete tasks' dataset (``keys-train``)
+again without the switch model's per-key travel offsets and counts the images they change.
 
-    python studies/alphabet_gap.py [LABEL=GLOB ...] [--figure docs/images/alphabet_gap.png]
+    python studies/alphabet_gap.py [LABEL=GLOB ...] [--figure docs/images/alphabet_gap.png] [--offsets]
 """
 
 from __future__ import annotations
@@ -85,6 +86,38 @@ def release_log() -> tuple[np.ndarray, np.ndarray] | None:
     return original_curves().get(("sim", TASK, "dqn"))
 
 
+def offsets_effect() -> list[str]:
+    """What the per-key travel offsets change in the discrete world: ``keys-train`` collected again
+    (same taps, same sensor noise) with a switch model without them, image by image."""
+    import tempfile
+
+    from tactile_braille.datasets.cache import _default_collection, default_dataset
+    from tactile_braille.datasets.collector import collect
+    from tactile_braille.datasets.store import load_dataset
+    from tactile_braille.keyboard.switch import SwitchModel
+    from tactile_braille.rigs.virtual import VirtualRig
+
+    procedure, seed, _ = _default_collection("keys-train", "braille_331", 0)
+    reference = default_dataset("keys-train", progress=False)
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "no-offsets.h5"
+        collect(
+            VirtualRig(switch=SwitchModel(travel_offsets_mm=())), procedure, path, seed=seed, progress=False
+        )
+        without = load_dataset(path)
+        labels = without.label_names()
+        ours, theirs = reference.observations, without.observations
+        changed = ~(ours == theirs).all(axis=(1, 2))
+        lines = [f"without the per-key offsets, {int(changed.sum())} of {len(changed)} images of keys-train "
+                 f"change"]  # fmt: skip
+        for key in sorted(set(labels[changed])):
+            taps = labels == key
+            share = (ours[taps] != theirs[taps]).mean(axis=(1, 2))
+            lines.append(f"  {key}: {int(changed[taps].sum())} of {int(taps.sum())} images, in at most "
+                         f"{share.max():.2%} of their pixels")  # fmt: skip
+    return lines
+
+
 def plot(groups: dict[str, list], path: Path) -> Path:
     from tactile_braille._figures import new_figure, save_figure
 
@@ -116,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("groups", nargs="*", metavar="LABEL=GLOB")
     parser.add_argument("--figure", type=Path, help="draw the groups' mean test return into this PNG")
+    parser.add_argument("--offsets", action="store_true", help="count the images the per-key offsets change")
     args = parser.parse_args(argv)
     items = args.groups or [f"{label}={ROOT / pattern}" for label, _, pattern in
                             (item.partition("=") for item in COMMITTED)]  # fmt: skip
@@ -133,6 +167,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     if args.figure is not None:
         print(f"wrote {plot(groups, args.figure)}")
+    if args.offsets:
+        print("\n".join(offsets_effect()))
     return 0
 
 

@@ -194,3 +194,13 @@ def test_alphabet_gap_reads_each_groups_seeds_and_draws_their_mean_beside_the_re
         script.main([f"none={tmp_path}/nothing_*"])
     with pytest.raises(SystemExit, match="a group is LABEL=GLOB"):
         script.main(["no pattern"])
+
+
+@pytest.mark.slow
+def test_alphabet_gap_counts_the_images_the_per_key_offsets_change():
+    lines = _load("alphabet_gap").offsets_effect()
+    assert lines[0].startswith("without the per-key offsets, ") and lines[0].endswith(
+        " of 3200 images of keys-train change"
+    )
+    changed = int(lines[0].split(", ")[1].split(" of ")[0])
+    assert 0 < changed < 3200 // 10 and len(lines) > 1  # a few images of the keys whose offsets matter
