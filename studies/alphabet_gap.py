@@ -28,13 +28,12 @@ from tactile_braille.evaluation.statistics import bootstrap_interval
 ROOT = Path(__file__).resolve().parents[1]
 TASK = "DiscreteAlphabet-v0"
 COMMITTED = (
-    f"`paper` preset=results/table3/paper/{TASK}__dqn__*",
-    f"`released` preset=results/table3-v2/released/{TASK}__dqn__*",
+    f"`paper` preset=results/table3/paper/{TASK}__dqn__[0-2]",
+    f"`released` preset=results/table3-v2/released/{TASK}__dqn__[0-2]",
     "`paper`, Adam epsilon 1e-8 and Huber loss=results/diagnostics/DA_paper_huber-eps8_*",
-    "`paper`, the released code's initial weights=results/diagnostics/DA_paper_released-init_*",
     "`paper`, one image per key=results/diagnostics/DA_paper_fixed-images_*",
 )
-"""The study's groups, as its notes read them (relative to the repository)."""
+"""The study's groups, as its notes read them (relative to the repository): seeds 0-2 of each."""
 
 
 def parse_groups(items: list[str]) -> dict[str, list[Path]]:
@@ -67,7 +66,7 @@ def describe(label: str, records) -> list[str]:
     epochs = min(len(r.returns) for r in records)
     tens = [np.mean([r.returns[i : i + 10].mean() for r in records]) for i in range(0, epochs, 10)]
     lines = [
-        f"{label} ({len(records)} seeds, {epochs} epochs)",
+        f"{label} ({len(records)} seed{'s' if len(records) > 1 else ''}, {epochs} epochs)",
         f"  first 95 % of the best (the paper's rule): {interval_text(paper)}; first 0.95: "
         f"{interval_text(absolute)}",
         f"  per seed (95 % of best / 0.95): {seeds}",
@@ -78,7 +77,7 @@ def describe(label: str, records) -> list[str]:
         accuracy = [t["accuracy"] for t in typed]
         steps = [t["total_steps"] for t in typed]
         lines.append(f"  typing (paper's protocol): {np.mean(accuracy):.3f} in {np.mean(steps):,.0f} steps "
-                     f"({len(typed)} seeds)")  # fmt: skip
+                     f"({len(typed)} seed{'s' if len(typed) > 1 else ''})")  # fmt: skip
     return lines
 
 
@@ -127,7 +126,12 @@ def plot(groups: dict[str, list], path: Path) -> Path:
         epochs = min(len(r.returns) for r in records)
         mean = np.mean([r.returns[:epochs] for r in records], axis=0)
         smooth = np.convolve(mean, np.ones(5) / 5, mode="valid")
-        ax.plot(np.arange(3, 3 + len(smooth)), smooth, lw=1.5, label=f"{label} ({len(records)} seeds)")
+        ax.plot(
+            np.arange(3, 3 + len(smooth)),
+            smooth,
+            lw=1.5,
+            label=f"{label} ({len(records)} seed{'s' if len(records) > 1 else ''})",
+        )
     log = release_log()
     if log is not None:
         epochs, returns = log

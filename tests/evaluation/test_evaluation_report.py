@@ -11,6 +11,7 @@ import pytest
 from tactile_braille.agents import TrainConfig, train
 from tactile_braille.agents.config import replace_settings
 from tactile_braille.agents.presets import preset_config
+from tactile_braille.datasets.procedures import PerturbedTaps
 from tactile_braille.evaluation.report import (
     PAPER_TABLE,
     RunRecord,
@@ -18,8 +19,8 @@ from tactile_braille.evaluation.report import (
     compared_groups,
     coverage_section,
     coverage_table,
+    dataset_label,
     departures,
-    grid_label,
     group,
     load_records,
     original_curves,
@@ -274,13 +275,23 @@ def test_write_report_over_two_seeds(env_datasets, tmp_path):
 GRID_6MM = {"procedure": {"procedure": "grid", "keys": "alphabet", "spacing_mm": 6.0, "depth_step_mm": 1.0}}
 
 
-def test_grid_label_names_only_a_grid_other_than_the_tasks():
-    assert grid_label(GRID_6MM) == "6 mm grid"
+def test_dataset_label_names_only_a_dataset_other_than_the_tasks():
+    assert dataset_label(GRID_6MM) == "6 mm grid"
     deeper = {"procedure": {**GRID_6MM["procedure"], "depth_step_mm": 2.0}}
-    assert grid_label(deeper) == "6 mm grid (2 mm depth steps)"
+    assert dataset_label(deeper) == "6 mm grid (2 mm depth steps)"
     paper = {"procedure": {**GRID_6MM["procedure"], "spacing_mm": 3.0}}
-    assert grid_label(paper) is None and grid_label(None) is None
-    assert grid_label({"procedure": {"procedure": "perturbed", "keys": "all"}}) is None
+    assert dataset_label(paper) is None and dataset_label(None) is None
+    assert dataset_label({"procedure": {"procedure": "perturbed", "keys": "all"}}) is None
+    perturbed = PerturbedTaps(per_key=3).describe()  # the paper's bounds, fewer taps: the same world's kind
+    assert dataset_label({"procedure": json.loads(json.dumps(perturbed))}) is None
+    fixed = PerturbedTaps(per_key=1, position_range_mm=0, depth_range_mm=(-0.5, -0.5), yaw_range_deg=0)
+    assert (
+        dataset_label({"procedure": json.loads(json.dumps(fixed.describe()))}) == "1 unperturbed tap per key"
+    )
+    narrow = PerturbedTaps(position_range_mm=0.5, yaw_range_deg=5).describe()
+    assert (
+        dataset_label({"procedure": narrow}) == "100 taps per key within +-0.5 mm, +-5 deg, depth -1 to +0 mm"
+    )
     assert source_world(GRID_6MM) == "6 mm grid" and source_world({"backend": "render"}) == "render backend"
     assert source_world(None) == "default dataset"
 

@@ -324,7 +324,10 @@ _INTRO = (
     "its steps were most likely counted with a reset per key (docs/evaluation.md), and on the continuous "
     "tasks it was measured in the released simulator's world, where the workspace's edge does not stop "
     'the sensor and taps read 2 mm deeper (`edges="overrun"`, `tap_depth="released"`; '
-    "docs/environments.md), not the environments' default world."
+    "docs/environments.md), not the environments' default world. On the discrete tasks the default world "
+    "samples the released simulator's way (one of 100 jittered taps of the key under the sensor), from "
+    "renders where the paper's were the real sensor's images, and how fast the paper's DQN learns the "
+    "discrete alphabet depends on the images' spread ([notes/alphabet-gap.md](notes/alphabet-gap.md))."
 )
 
 

@@ -125,12 +125,16 @@ class RunRecord:
         return convergence_epoch(list(self.returns), level=0.95)
 
 
-def grid_label(world: dict | None) -> str | None:
-    """``6 mm grid`` for a world whose dataset is a grid other than its task's default (the paper's
-    3 mm alphabet and 1 mm arrows grids), with its depth step where that differs too; else None."""
+def dataset_label(world: dict | None) -> str | None:
+    """What sets a run's dataset apart from its task's default, in a few words: ``6 mm grid`` for a grid
+    other than the paper's (3 mm alphabet and 1 mm arrows grids), with its depth step where that
+    differs too; ``1 unperturbed tap per key`` (or the bounds) for perturbed taps drawn within other
+    bounds than the paper's; else None."""
     from tactile_braille.datasets.procedures import GridTaps
 
     procedure = (world or {}).get("procedure") or {}
+    if procedure.get("procedure") == "perturbed":
+        return _perturbed_label(procedure)
     if procedure.get("procedure") != "grid":
         return None
     default = GridTaps(keys=procedure["keys"])
@@ -140,12 +144,28 @@ def grid_label(world: dict | None) -> str | None:
     return f"{spacing:g} mm grid" + (f" ({depth:g} mm depth steps)" if depth != default.depth_step_mm else "")
 
 
+def _perturbed_label(procedure: dict) -> str | None:
+    from tactile_braille.datasets.procedures import PerturbedTaps
+
+    paper = PerturbedTaps()
+    per_key = procedure.get("per_key", paper.per_key)
+    position = procedure.get("position_range_mm", paper.position_range_mm)
+    low, high = procedure.get("depth_range_mm", paper.depth_range_mm)
+    yaw = procedure.get("yaw_range_deg", paper.yaw_range_deg)
+    if (position, (low, high), yaw) == (paper.position_range_mm, paper.depth_range_mm, paper.yaw_range_deg):
+        return None
+    taps = f"{per_key} {'tap' if per_key == 1 else 'taps'} per key"
+    if position == 0 and low == high and yaw == 0:
+        return taps.replace(" tap", " unperturbed tap", 1)
+    return f"{taps} within +-{position:g} mm, +-{yaw:g} deg, depth {low:+g} to {high:+g} mm"
+
+
 def source_world(world: dict | None) -> str:
     """Where a warm start's source learnt, in a few words: ``6 mm grid``, ``render backend``..."""
     world = world or {}
     if world.get("backend", "dataset") != "dataset":
         return f"{world['backend']} backend"
-    return grid_label(world) or "default dataset"
+    return dataset_label(world) or "default dataset"
 
 
 def _read_json(path: Path) -> dict | None:
@@ -198,7 +218,7 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
             path=run_dir, task=task_name(config.task), algo=config.algo, seed=config.seed,
             returns=np.array([row["test/episodic_return"] for row in rows]), typing=typing, config=config,
             seconds=float(np.nansum([row.get("time_s", np.nan) for row in rows])), transfer=transfer,
-            grid=grid_label(world), init=_read_json(run_dir / "init.json"),
+            grid=dataset_label(world), init=_read_json(run_dir / "init.json"),
             world=(GENERATOR_VERSION if task_of(config.task) is None else None)
             if world is None else world.get("generator_version", world.get("rig")),
         ))  # fmt: skip
