@@ -72,6 +72,12 @@ def describe(label: str, records) -> list[str]:
         f"  per seed (95 % of best / 0.95): {seeds}",
         "  mean test return over each ten epochs: " + ", ".join(f"{v:.2f}" for v in tens),
     ]
+    lengths = [len(r.returns) for r in records]
+    if len(set(lengths)) > 1:  # a run stopped once its curve answered: its typing is its own
+        lines.append("  epochs per seed (a shorter run was stopped): " + ", ".join(map(str, lengths)))
+        lines += [f"  typing, seed {r.seed} after {len(r.returns)} epochs: {r.typing['accuracy']:.3f} in "
+                  f"{r.typing['total_steps']:,} steps" for r in records if r.typing]  # fmt: skip
+        return lines
     typed = [r.typing for r in records if r.typing]  # the paper's protocol: no reset between keys
     if typed:
         accuracy = [t["accuracy"] for t in typed]
