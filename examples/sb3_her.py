@@ -21,7 +21,7 @@ import argparse
 from pathlib import Path
 
 import tactile_braille  # noqa: F401 - registers the environments
-from tactile_braille.baselines.sb3 import DEFAULTS, LABELS, score, train
+from tactile_braille.baselines.sb3 import ALGORITHMS, DEFAULTS, score, train
 from tactile_braille.evaluation.results import make_result, write_result
 
 
@@ -47,7 +47,7 @@ def main(argv=None) -> int:
         model.save(args.save)
     report = score(model, args.task, args.dataset)
     result = make_result(
-        report, method=LABELS[args.algo], seed=args.seed, env_steps=args.steps,
+        report, method=ALGORITHMS[args.algo].label, seed=args.seed, env_steps=args.steps,
         notes=f"examples/sb3_her.py; {seconds / 60:.0f} min on 1 CPU thread(s)",
     )  # fmt: skip
     write_result(result, args.output)

@@ -155,7 +155,14 @@ hours each on one CPU thread with bf16)."""
 ENV_IDS: tuple[str, ...] = tuple(task.env_id for task in REGISTERED_TASKS)
 
 
+def registered_task(task: str) -> RegisteredTask | None:
+    """The registered task ``task`` (its id, with or without its namespace); None for a task registered
+    elsewhere."""
+    return next((t for t in REGISTERED_TASKS if task in (t.name, t.env_id)), None)
+
+
 def official_budget(task: str) -> int | None:
     """The official training budget, in environment steps, of the registered task ``task`` (its id,
     with or without its namespace); None for a task registered elsewhere or without one."""
-    return next((t.budget_steps for t in REGISTERED_TASKS if task in (t.name, t.env_id)), None)
+    registered = registered_task(task)
+    return None if registered is None else registered.budget_steps

@@ -231,9 +231,8 @@ def _collect(args: argparse.Namespace) -> int:
     from tactile_braille.datasets.procedures import GridTaps, PerturbedTaps
 
     if args.procedure == "perturbed":
-        jitter = {name: value for name, value in (("position_range_mm", args.position_range_mm),
-                  ("depth_range_mm", args.depth_range_mm and tuple(args.depth_range_mm)),
-                  ("yaw_range_deg", args.yaw_range_deg)) if value is not None}  # fmt: skip
+        bounds = ("position_range_mm", "depth_range_mm", "yaw_range_deg")
+        jitter = {name: getattr(args, name) for name in bounds if getattr(args, name) is not None}
         procedure = PerturbedTaps(
             keys=args.keys, per_key=args.per_key, split=args.split, seed=args.seed, **jitter
         )
@@ -551,12 +550,16 @@ def _leaderboard(args: argparse.Namespace) -> int:
     if args.figure is not None and (args.output is None or args.figure.is_dir()):
         raise ValueError(f"--figure {args.figure}: name the PNG to write, with --output (the page links it)")
     results = load_results(args.results)
-    page = leaderboard_markdown(results, title=args.title, reference=reference, strict=args.strict)
+    link = None
+    if args.figure is not None:
+        link = Path(os.path.relpath(args.figure.resolve(), args.output.resolve().parent)).as_posix()
+    options = {"title": args.title, "reference": reference, "strict": args.strict}
+    page = leaderboard_markdown(results, **options, figure=link)
     if args.figure is not None:
         args.figure.parent.mkdir(parents=True, exist_ok=True)
-        if plot_performance_profiles(results, args.figure, reference) is not None:
-            link = Path(os.path.relpath(args.figure.resolve(), args.output.resolve().parent)).as_posix()
-            page = leaderboard_markdown(results, args.title, reference, args.strict, figure=link)
+        if plot_performance_profiles(results, args.figure, reference) is None:  # no method is ranked
+            page = leaderboard_markdown(results, **options)
+        else:
             print(f"wrote {args.figure}")
     if args.headline is not None:
         write_headline(args.headline, headline_markdown(results, reference))

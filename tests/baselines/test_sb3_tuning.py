@@ -46,8 +46,8 @@ def test_the_protocol_refuses_to_tune_on_reported_seeds_or_report_tuning_seeds(t
 
 
 def test_each_algorithm_is_refused_on_the_other_kind_of_actions_before_any_study_is_made(tmp_path):
-    assert sb3.ACTIONS.keys() == sb3.DEFAULTS.keys() == sb3.SEARCH_SPACES.keys() == sb3.LABELS.keys()
-    for algo, kind in sb3.ACTIONS.items():
+    assert sb3.ALGORITHMS.keys() == sb3.DEFAULTS.keys() == sb3.SEARCH_SPACES.keys()
+    for algo, kind in ((name, algorithm.actions) for name, algorithm in sb3.ALGORITHMS.items()):
         task = "DiscreteArrows-v0" if kind == "continuous" else "ContinuousArrows-v0"
         with pytest.raises(ValueError, match=f"{algo} takes {kind} actions; {task}'s are "):
             sb3.tune(task, algo, 1, tmp_path / "study")

@@ -69,6 +69,9 @@ def test_the_performance_profile_is_the_share_above_each_threshold_each_task_wei
     assert performance_profile([[0.9]], [0.9])[0].tolist() == [0.0]
     one = performance_profile([[0.9], [0.2]], [0.5])
     assert [v.tolist() for v in one] == [[0.5], [0.5], [0.5]]  # one run a task: nothing to resample
+    # A task of one run beside tasks of more: its share is certain in every resample, the others vary.
+    mixed, low_mixed, high_mixed = performance_profile([[0.9], [0.2, 0.8]], [0.5])
+    assert mixed.tolist() == [(1 + 0.5) / 2] and low_mixed[0] == 0.5 and high_mixed[0] == 1.0
     assert np.array_equal(performance_profile(tasks, grid)[1], performance_profile(tasks, grid)[1])
     with pytest.raises(ValueError, match="at least one run of each task"):
         performance_profile([[1.0], []], [0.5])

@@ -37,8 +37,7 @@ import gymnasium as gym
 import numpy as np
 
 from tactile_braille._io import atomic_path
-from tactile_braille._tasks import REGISTERED_TASKS
-from tactile_braille._tasks import official_budget as _official_budget
+from tactile_braille._tasks import REGISTERED_TASKS, RegisteredTask, registered_task
 from tactile_braille.evaluation.leaderboard import typing_score
 from tactile_braille.evaluation.results import make_result, write_result
 from tactile_braille.evaluation.scoring import TypingReport, evaluate_policy
@@ -66,14 +65,32 @@ and batches of 64 (SAC, TD3, TQC), as the untuned rows of the leaderboard ran
 (``share_features_extractor``) in SAC, TD3 and TQC. SB3-Contrib's CrossQ takes vector observations
 only (its one policy is ``MlpPolicy``), not the tasks' images with goals, so it is not among them."""
 
-ACTIONS = {
-    "dqn": "discrete",
-    "qrdqn": "discrete",
-    "sac": "continuous",
-    "td3": "continuous",
-    "tqc": "continuous",
+
+@dataclass(frozen=True)
+class Algorithm:
+    """One algorithm of a library: where its class lives, the actions it takes, its leaderboard label."""
+
+    package: str  # the distribution: "stable-baselines3" or "sb3-contrib"
+    module: str  # its import name
+    name: str  # the class
+    actions: str  # "discrete" or "continuous"
+    label: str
+
+    def model_class(self):
+        import importlib
+
+        return getattr(importlib.import_module(self.module), self.name)
+
+
+_SB3, _CONTRIB = ("stable-baselines3", "stable_baselines3"), ("sb3-contrib", "sb3_contrib")
+ALGORITHMS: dict[str, Algorithm] = {
+    "dqn": Algorithm(*_SB3, "DQN", "discrete", "SB3 DQN + HER"),
+    "sac": Algorithm(*_SB3, "SAC", "continuous", "SB3 SAC + HER"),
+    "td3": Algorithm(*_SB3, "TD3", "continuous", "SB3 TD3 + HER"),
+    "qrdqn": Algorithm(*_CONTRIB, "QRDQN", "discrete", "SB3-Contrib QR-DQN + HER"),
+    "tqc": Algorithm(*_CONTRIB, "TQC", "continuous", "SB3-Contrib TQC + HER"),
 }
-"""The kind of action each algorithm takes."""
+"""The algorithms the module runs, by the name the command line takes."""
 
 Choice = tuple
 """A categorical dimension of a search space: its values."""
@@ -115,38 +132,30 @@ SEARCH_SPACES: dict[str, dict[str, Range | Choice]] = {
             "tau": Choice((0.005, 0.01, 0.02)), "top_quantiles_to_drop_per_net": Choice((0, 2, 5)), **_HER},
 }  # fmt: skip
 """What a search may change, per algorithm (the HER goal strategy and count for all)."""
-LABELS = {"dqn": "SB3 DQN + HER", "sac": "SB3 SAC + HER", "td3": "SB3 TD3 + HER",
-          "qrdqn": "SB3-Contrib QR-DQN + HER", "tqc": "SB3-Contrib TQC + HER"}  # fmt: skip
+
+
+def _registered(task: str) -> RegisteredTask:
+    registered = registered_task(task)
+    if registered is None or registered.budget_steps is None:
+        raise ValueError(f"{task!r} is no registered task with an official budget; choose one of "
+                         f"{[t.name for t in REGISTERED_TASKS]}")  # fmt: skip
+    return registered
 
 
 def official_budget(task: str) -> int:
     """The task's official training budget in environment steps (:mod:`tactile_braille._tasks`)."""
-    budget = _official_budget(task)
-    if budget is None:
-        raise ValueError(f"{task!r} is no registered task with an official budget; choose one of "
-                         f"{[t.name for t in REGISTERED_TASKS]}")  # fmt: skip
-    return budget
+    return _registered(task).budget_steps
 
 
 def check_algo(task: str, algo: str) -> None:
     """Refuse an algorithm this module does not run, or one that cannot act in the task's actions."""
-    if algo not in DEFAULTS:
-        raise ValueError(f"algo must be one of {sorted(DEFAULTS)}, got {algo!r}")
-    official_budget(task)  # a registered task
-    kind = "continuous" if task.removeprefix("tactile_braille/").startswith("Continuous") else "discrete"
-    if ACTIONS[algo] != kind:
-        able = sorted(a for a, k in ACTIONS.items() if k == kind)
-        raise ValueError(f"{algo} takes {ACTIONS[algo]} actions; {task}'s are {kind}: use one of {able}")
-
-
-def _model_class(algo: str):
-    if algo in ("qrdqn", "tqc"):
-        from sb3_contrib import QRDQN, TQC
-
-        return {"qrdqn": QRDQN, "tqc": TQC}[algo]
-    from stable_baselines3 import DQN, SAC, TD3
-
-    return {"dqn": DQN, "sac": SAC, "td3": TD3}[algo]
+    if algo not in ALGORITHMS:
+        raise ValueError(f"algo must be one of {sorted(ALGORITHMS)}, got {algo!r}")
+    kind = "continuous" if _registered(task).continuous else "discrete"
+    takes = ALGORITHMS[algo].actions
+    if takes != kind:
+        able = sorted(name for name, a in ALGORITHMS.items() if a.actions == kind)
+        raise ValueError(f"{algo} takes {takes} actions; {task}'s are {kind}: use one of {able}")
 
 
 def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None):
@@ -158,10 +167,10 @@ def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, data
     settings = {**DEFAULTS[algo], **settings}
     her = {name: settings.pop(name) for name in ("goal_selection_strategy", "n_sampled_goal")}
     settings["learning_starts"] = min(settings["learning_starts"], steps)
-    if ACTIONS[algo] == "continuous":
+    if ALGORITHMS[algo].actions == "continuous":
         settings["policy_kwargs"] = {"share_features_extractor": True}
     env = gym.make(f"tactile_braille/{task}", **({"dataset": str(dataset)} if dataset else {}))
-    model_class = _model_class(algo)
+    model_class = ALGORITHMS[algo].model_class()
     return model_class(
         "MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=her,
         buffer_size=max(steps, 1), seed=seed, device="cpu", verbose=0, **settings,
@@ -290,7 +299,7 @@ def summary(study, task: str, algo: str) -> dict:
     space = {name: {"range": [dim.low, dim.high], "log": dim.log} if isinstance(dim, Range)
              else {"choice": list(dim)} for name, dim in SEARCH_SPACES[algo].items()}  # fmt: skip
     return {
-        "library": "sb3-contrib" if algo in ("qrdqn", "tqc") else "stable-baselines3",
+        "library": ALGORITHMS[algo].package,
         "algo": algo,
         "task": task,
         "search": "optuna TPE, median pruning",
@@ -349,7 +358,7 @@ def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=
                         task, algo, tuning["best"]["params"], tuning["steps"], seed, dataset
                     )
                     result = make_result(
-                        score(model, task, dataset), method=f"{LABELS[algo]} (tuned)", seed=seed,
+                        score(model, task, dataset), method=f"{ALGORITHMS[algo].label} (tuned)", seed=seed,
                         env_steps=tuning["steps"],
                         notes=f"tactile_braille.baselines.sb3; {seconds / 60:.1f} min on one CPU thread",
                         tuning=tuning,
@@ -369,7 +378,7 @@ def main(argv=None) -> int:
     for name in ("tune", "run"):
         command = commands.add_parser(name)
         command.add_argument("task", help="e.g. DiscreteArrows-v0")
-        command.add_argument("algo", choices=sorted(DEFAULTS))
+        command.add_argument("algo", choices=sorted(ALGORITHMS))
         command.add_argument(
             "--study", type=Path, required=True, help="folder of the search's study (SQLite)"
         )

@@ -401,8 +401,8 @@ _PROFILES_CAPTION = (
     "Performance profiles (rliable's): for each task's best methods within its official budget (ours on "
     "each track, the best other method), the share of training seeds whose typing accuracy is above each "
     "threshold, with a 95 % percentile-bootstrap band; a curve further up and to the right types better "
-    "more reliably; thresholds from 0.8 up, where the best methods differ (a method whose seeds all type "
-    "below 0.8 lies at 0). The paper's typing accuracy is the dashed line."
+    f"more reliably; thresholds from {PROFILE_FROM} up, where the best methods differ (a method whose "
+    f"seeds all type below {PROFILE_FROM} lies at 0). The paper's typing accuracy is the dashed line."
 )
 
 

@@ -91,8 +91,9 @@ def performance_profile(
         confidence: the interval's level.
 
     Returns:
-        (shares, low, high), each an array over ``thresholds``; an interval collapses to its value
-        where every task has one run.
+        (shares, low, high), each an array over ``thresholds``. A task of one run is certain under
+        resampling (its one run is drawn every time): its share enters every resample as it is, and
+        where every task has one run the interval collapses to the value.
     """
     from scipy.stats import bootstrap
 
@@ -101,18 +102,22 @@ def performance_profile(
     if not samples or any(s.size == 0 for s in samples):
         raise ValueError("a performance profile needs at least one run of each task")
 
-    def shares(*runs, axis=-1):
-        # Each task's runs (..., n) -> the share above each tau, (taus, ...); their mean over the tasks.
-        return np.mean(
-            [(np.moveaxis(r, axis, -1)[None] > taus.reshape(-1, *[1] * np.ndim(r))).mean(-1) for r in runs],
-            axis=0,
-        )
+    def above(runs: np.ndarray, axis: int = -1) -> np.ndarray:
+        """A task's runs (..., n) -> the share above each tau, (taus, ...)."""
+        runs = np.moveaxis(runs, axis, -1)
+        return (runs[None] > taus.reshape(-1, *[1] * runs.ndim)).mean(-1)
 
-    value = shares(*samples)
-    if all(s.size < 2 for s in samples):
+    certain = sum((above(s) for s in samples if s.size < 2), np.zeros(len(taus)))
+    resampled = [s for s in samples if s.size >= 2]
+    if not resampled:
+        value = certain / len(samples)
         return value, value.copy(), value.copy()
-    result = bootstrap(samples, shares, n_resamples=RESAMPLES, confidence_level=confidence, paired=False,
+
+    def shares(*runs, axis=-1):
+        total = sum(above(r, axis) for r in runs)  # (taus, resamples...)
+        return (total + certain.reshape(-1, *[1] * (total.ndim - 1))) / len(samples)
+
+    value = shares(*resampled)
+    result = bootstrap(resampled, shares, n_resamples=RESAMPLES, confidence_level=confidence, paired=False,
                        method="percentile", rng=np.random.default_rng(0))  # fmt: skip
-    low, high = result.confidence_interval
-    # A resampling where every draw agrees gives NaN bounds in SciPy; the share is then certain.
-    return value, np.where(np.isnan(low), value, low), np.where(np.isnan(high), value, high)
+    return value, result.confidence_interval.low, result.confidence_interval.high
