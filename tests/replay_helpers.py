@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tactile_braille.agents.replay import EpisodeReplayBuffer
+
 GOALS = 4
 PREVIOUS = 5
 FEATURES = 6
@@ -41,3 +43,27 @@ class Frames:
 def as_images(frames: list[np.ndarray]) -> np.ndarray:
     """(100, 100, 1) images as a (N, 1, 100, 100) batch."""
     return np.moveaxis(np.stack(frames), -1, 1)
+
+
+def goal_indices(goals: np.ndarray) -> np.ndarray:
+    """Indices of sampled goal one-hots (every sampled goal must be exactly one key)."""
+    assert ((goals == 0) | (goals == 1)).all() and (goals.sum(-1) == 1).all()
+    return goals.argmax(-1)
+
+
+def n_step_buffer(n_step: int, relabel: str = "paper", capacity: int = 100, **kwargs) -> EpisodeReplayBuffer:
+    return EpisodeReplayBuffer(capacity, GOALS, (), PREVIOUS, relabel=relabel,
+                               observation_shape=(FEATURES,), n_step=n_step, gamma=0.5, **kwargs)  # fmt: skip
+
+
+def feature_episode(buffer, goal: int, pressed: int | None, steps: int, first_frame: int) -> None:
+    """An episode whose frames are numbered (each feature vector holds its number) and whose actions
+    are its steps' indices; it ends pressing ``pressed`` (None: a time-out)."""
+    frame = lambda k: np.full(FEATURES, first_frame + k, dtype=np.float32)  # noqa: E731
+    buffer.start_episode(replay_observation(frame(0), goal))
+    for t in range(steps):
+        last = t == steps - 1
+        achieved = pressed if last else None
+        observation = replay_observation(frame(t + 1), goal, achieved)
+        buffer.add_step(t, float(last and pressed == goal), observation, last and pressed is not None)
+    buffer.end_episode()

@@ -16,7 +16,7 @@ from tactile_braille.cli import _train_config, build_parser, main
 from tactile_braille.cli_config import POSITIONAL, RECORD_ONLY
 
 TASKS = {"dqn": "DiscreteArrows-v0", "sac_discrete": "DiscreteArrows-v0", "planner": "DiscreteArrows-v0",
-         "sac": "ContinuousArrows-v0", "td3": "ContinuousArrows-v0"}  # fmt: skip
+         "sac": "ContinuousArrows-v0", "td3": "ContinuousArrows-v0", "mrq": "DiscreteArrows-v0"}  # fmt: skip
 
 
 def _settings(algo: str) -> dict[str, tuple[type, object]]:

@@ -24,7 +24,16 @@ import pytest
 import _replay_before as before
 import feature_agents
 import replay_helpers
-from replay_helpers import FEATURES, GOALS, Frames, as_images, replay_observation
+from replay_helpers import (
+    FEATURES,
+    GOALS,
+    Frames,
+    as_images,
+    feature_episode,
+    goal_indices,
+    n_step_buffer,
+    replay_observation,
+)
 from tactile_braille.agents import replay as after
 from tactile_braille.agents.replay import (
     FRAME_LABELS,
@@ -346,12 +355,6 @@ def fill(
             action += 1
         buffer.end_episode()
     return table
-
-
-def goal_indices(goals: np.ndarray) -> np.ndarray:
-    """Indices of sampled goal one-hots (every sampled goal must be exactly one key)."""
-    assert ((goals == 0) | (goals == 1)).all() and (goals.sum(-1) == 1).all()
-    return goals.argmax(-1)
 
 
 def all_buffer(**kwargs) -> EpisodeReplayBuffer:
@@ -1263,24 +1266,6 @@ def test_subclasses_still_see_every_frame_stored_through_store_frame():
 
 
 # ---------------------------------------------------------------- n-step returns
-def n_step_buffer(n_step: int, relabel: str = "paper", capacity: int = 100, **kwargs) -> EpisodeReplayBuffer:
-    return EpisodeReplayBuffer(capacity, GOALS, (), replay_helpers.PREVIOUS, relabel=relabel,
-                               observation_shape=(FEATURES,), n_step=n_step, gamma=0.5, **kwargs)  # fmt: skip
-
-
-def feature_episode(buffer, goal: int, pressed: int | None, steps: int, first_frame: int) -> None:
-    """An episode whose frames are numbered (each feature vector holds its number) and whose actions
-    are its steps' indices; it ends pressing ``pressed`` (None: a time-out)."""
-    frame = lambda k: np.full(FEATURES, first_frame + k, dtype=np.float32)  # noqa: E731
-    buffer.start_episode(replay_helpers.replay_observation(frame(0), goal))
-    for t in range(steps):
-        last = t == steps - 1
-        achieved = pressed if last else None
-        observation = replay_helpers.replay_observation(frame(t + 1), goal, achieved)
-        buffer.add_step(t, float(last and pressed == goal), observation, last and pressed is not None)
-    buffer.end_episode()
-
-
 @pytest.mark.parametrize("relabel", RELABELLING)
 def test_n_step_returns_sum_their_episodes_rewards_and_stop_at_its_end(relabel):
     buffer = n_step_buffer(3, relabel)

@@ -1,5 +1,5 @@
 """The paper's agents with Hindsight Experience Replay: double + dueling DQN, discrete SAC, SAC, TD3;
-and ours, the key-graph planner.
+MR.Q, a recent learner from pixels for both kinds of actions; and ours, the key-graph planner.
 
 An agent is a class that keeps the :class:`Agent` contract, a hyperparameter
 class (an :class:`AgentConfig`), and one :class:`AgentSpec` given to
@@ -36,11 +36,13 @@ _EXPORTS = {
     "DiscreteSACConfig": "config",
     "SACConfig": "config",
     "TD3Config": "config",
+    "MRQConfig": "config",
     "PlannerConfig": "config",
     "DQNAgent": "dqn",
     "DiscreteSACAgent": "sac_discrete",
     "SACAgent": "sac",
     "TD3Agent": "td3",
+    "MRQAgent": "mrq",
     "PlannerAgent": "planner",
 }
 __all__ = sorted(_EXPORTS)

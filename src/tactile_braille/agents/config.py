@@ -3,7 +3,7 @@
 ``TrainConfig`` holds the loop's schedule and the run's environment and
 machine settings, and one group per concern: ``agent`` (the algorithm's
 hyperparameters, an :class:`AgentConfig`: :class:`DQNConfig`,
-:class:`DiscreteSACConfig`, :class:`SACConfig`, :class:`TD3Config`,
+:class:`DiscreteSACConfig`, :class:`SACConfig`, :class:`TD3Config`, :class:`MRQConfig`,
 :class:`PlannerConfig`, or the class an agent registers with
 :mod:`~tactile_braille.agents.registry`), ``replay`` (:class:`ReplayConfig`),
 ``touch`` (:class:`TouchConfig`, the touch encoder of the ``fast`` preset) and
@@ -399,6 +399,99 @@ class TD3Config(AgentConfig):
 
     def proprio_settings(self) -> dict[str, str]:
         return {"agent.critic_pose": CRITIC_POSE_USES} if self.critic_pose else {}
+
+
+@dataclass(frozen=True)
+class MRQConfig(AgentConfig):
+    """Hyperparameters of MR.Q (:mod:`~tactile_braille.agents.mrq`); defaults: its paper's (Fujimoto
+    et al. 2025, Table 4).
+
+    Attributes:
+        gamma: discount.
+        batch_size: transitions (or sub-trajectories) per update of the encoder and of the value and
+            policy.
+        target_every: updates between hard copies of the target networks; at each copy the encoder
+            first learns for as many updates, then stays fixed until the next.
+        value_horizon: steps of the multi-step return of the value's target.
+        encoder_horizon: steps the encoder's model is unrolled over.
+        exploration_noise: deviation of the Gaussian noise on the policy's output while exploring
+            (halved for discrete actions, whose one-hot outputs span [0, 1]).
+        target_noise: deviation of the target policy's smoothing noise (halved for discrete actions).
+        noise_clip: bound of the smoothing noise (halved for discrete actions).
+        dynamics_weight: weight of the encoder's next-embedding loss.
+        reward_weight: weight of its reward loss (cross-entropy over two-hot bins).
+        done_weight: weight of its episode-end loss.
+        priority_alpha: exponent of the prioritised replay's priorities (LAP; 0: uniform).
+        min_priority: the priorities' floor (LAP's).
+        state_size: length of the state embedding (image, goal, previous action).
+        action_size: length of the action embedding.
+        state_action_size: length of the state-action embedding the value reads.
+        hidden_units: units of the hidden layers of the encoder, the value and the policy.
+        encoder_learning_rate: AdamW's step size for the encoder.
+        value_learning_rate: AdamW's step size for the value.
+        policy_learning_rate: AdamW's step size for the policy.
+        weight_decay: AdamW's weight decay, for all three.
+        value_grad_clip: the value's gradient norm is clipped to this.
+        gumbel_tau: temperature of the discrete policy's Gumbel-softmax.
+        pre_activation_weight: penalty on the policy's squared pre-activations.
+        reward_bins: bins of the reward model's two-hot encoding.
+        reward_bound: the bins span symexp of [-reward_bound, reward_bound].
+    """
+
+    gamma: float = 0.99
+    batch_size: int = 256
+    target_every: int = 250
+    value_horizon: int = 3
+    encoder_horizon: int = 5
+    exploration_noise: float = 0.2
+    target_noise: float = 0.2
+    noise_clip: float = 0.3
+    dynamics_weight: float = 1.0
+    reward_weight: float = 0.1
+    done_weight: float = 0.1
+    priority_alpha: float = 0.4
+    min_priority: float = 1.0
+    state_size: int = 512
+    action_size: int = 256
+    state_action_size: int = 512
+    hidden_units: int = 512
+    encoder_learning_rate: float = 1e-4
+    value_learning_rate: float = 3e-4
+    policy_learning_rate: float = 3e-4
+    weight_decay: float = 1e-4
+    value_grad_clip: float = 20.0
+    gumbel_tau: float = 10.0
+    pre_activation_weight: float = 1e-5
+    reward_bins: int = 65
+    reward_bound: float = 10.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _at_least(self, 1, "target_every", "value_horizon", "encoder_horizon", "state_size", "action_size",
+                  "state_action_size", "hidden_units")  # fmt: skip
+        _at_least(self, 2, "reward_bins")
+        problems = [
+            f"{name} must be positive, got {getattr(self, name)}"
+            for name in ("encoder_learning_rate", "value_learning_rate", "policy_learning_rate",
+                         "min_priority", "value_grad_clip", "gumbel_tau", "reward_bound")
+            if not getattr(self, name) > 0
+        ] + [
+            f"{name} must not be negative, got {getattr(self, name)}"
+            for name in ("exploration_noise", "dynamics_weight", "reward_weight", "done_weight",
+                         "weight_decay", "pre_activation_weight")
+            if not getattr(self, name) >= 0
+        ]  # fmt: skip
+        if not 0 <= self.priority_alpha <= 1:
+            problems.append(f"priority_alpha must be in [0, 1], got {self.priority_alpha}")
+        if problems:
+            raise ValueError("MRQConfig: " + "; ".join(problems))
+
+    def check_run(self, run: TrainConfig) -> None:
+        if run.replay.n_step != 1:
+            raise ValueError(
+                f"mrq builds its own {self.value_horizon}-step returns from sub-trajectories "
+                f"(agent.value_horizon): replay.n_step must be 1, got {run.replay.n_step}"
+            )
 
 
 @dataclass(frozen=True)

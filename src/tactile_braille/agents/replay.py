@@ -366,6 +366,7 @@ class Sampled(NamedTuple):
     frames: np.ndarray  # (B, 2) frame slots: the observation and the frame the target bootstraps from
     goals: np.ndarray  # (B, goal_size) the goals the batch was relabelled to
     observations: Callable[[np.ndarray], np.ndarray]  # frame slots -> images or encoder features
+    rewards: np.ndarray  # (B,) each transition's own reward under its batch goal (one step)
 
 
 class BatchExtra:
@@ -469,6 +470,50 @@ class EpisodeSteps(BatchExtra):
 
     def add(self, buffer, sampled, rng):
         return {}
+
+
+class SubTrajectories(BatchExtra):
+    """The ``horizon`` steps of its episode that start at each sampled transition (the transition
+    itself first), under the batch's goals, for agents that unroll a model or build their own
+    multi-step returns: ``horizon_actions`` (B, H, ...), ``horizon_rewards``, ``horizon_dones`` and
+    ``horizon_valid`` (B, H) float32, ``horizon_next_images`` (B, H, C, 100, 100) (or features) and
+    ``horizon_next_previous_actions`` (B, H, n): step ``j``'s action, reward, end, next frame and
+    next previous action. ``horizon_valid`` is 0 for the steps past the episode's last (their
+    entries are another episode's and must be masked out).
+
+    Args:
+        horizon: steps per sub-trajectory, at least 1.
+    """
+
+    keeps_remaining = True
+
+    def __init__(self, horizon: int) -> None:
+        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+            raise ValueError(f"a sub-trajectory's horizon must be a whole number >= 1, got {horizon!r}")
+        self.horizon = horizon
+
+    def add(self, buffer, sampled, rng):
+        index, goals = sampled.index, sampled.goals
+        offsets = np.arange(self.horizon)
+        steps = (index[:, None] + offsets) % buffer.capacity  # (B, H)
+        valid = buffer.remaining[index].astype(np.int64)[:, None] >= offsets
+        flat = steps.reshape(-1)
+        rewards = buffer.relabelling.rewards(
+            np.repeat(goals, self.horizon, axis=0), buffer.rewards[flat], buffer.achieved[flat]
+        )
+        rewards[0 :: self.horizon] = np.asarray(sampled.rewards, dtype=np.float32)  # the batch's own
+        next_frames = sampled.observations(buffer.frame_index[flat, 1])
+        if buffer.shift and buffer.cache.features is None:  # moved as the batch's own images are
+            next_frames = random_shift(next_frames, buffer.shift, rng)
+        batch = len(index)
+        return {
+            "horizon_actions": buffer.actions[steps],
+            "horizon_rewards": (rewards.reshape(batch, self.horizon) * valid).astype(np.float32),
+            "horizon_dones": (buffer.dones[steps] * valid).astype(np.float32),
+            "horizon_valid": valid.astype(np.float32),
+            "horizon_next_images": next_frames.reshape(batch, self.horizon, *next_frames.shape[1:]),
+            "horizon_next_previous_actions": buffer.previous_actions[steps, 1],
+        }
 
 
 # ================================================================= the buffer
@@ -697,15 +742,26 @@ class EpisodeReplayBuffer:
         self.size = min(self.size + 1, self.capacity)
 
     # --------------------------------------------------------- reading
-    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """A uniform batch of transitions (images as (B, C, H, W) uint8, or features (B, n))."""
+    def sample(
+        self, batch_size: int, rng: np.random.Generator, index: np.ndarray | None = None
+    ) -> dict[str, np.ndarray]:
+        """A uniform batch of transitions (images as (B, C, H, W) uint8, or features (B, n)); ``index``:
+        the transitions' slots, drawn by the caller (a prioritised replay), in place of uniform ones."""
         if self.size == 0:
             raise RuntimeError("the replay buffer is empty")
-        index = rng.integers(self.size, size=batch_size)
+        if index is None:
+            index = rng.integers(self.size, size=batch_size)
+        else:
+            index = np.asarray(index, dtype=np.int64)
+            if index.shape != (batch_size,) or index.min() < 0 or index.max() >= self.size:
+                raise ValueError(
+                    f"index must hold {batch_size} slots in [0, {self.size}), got shape {index.shape}"
+                    + (f" in [{index.min()}, {index.max()}]" if index.size else "")
+                )
         goals, rewards = self.relabelling.sampled(
             self.goals[index], self.rewards[index], self.achieved[index], self.finals[index], rng
         )
-        last = index  # the transition whose next frame the target bootstraps from
+        last, step_rewards = index, rewards  # the transition whose next frame the target bootstraps from
         if self.n_step > 1:
             rewards, last, steps = self._n_step_returns(index, goals, rewards)
         frames = np.stack([self.frame_index[index, 0], self.frame_index[last, 1]], axis=1)
@@ -722,7 +778,7 @@ class EpisodeReplayBuffer:
         }
         if self.n_step > 1:
             batch["steps"] = steps
-        sampled = Sampled(index, last, frames, goals, observations)
+        sampled = Sampled(index, last, frames, goals, observations, step_rewards)
         for extra in self.extras:
             batch.update(extra.add(self, sampled, rng))
         if self.shift:

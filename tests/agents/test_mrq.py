@@ -1,0 +1,165 @@
+"""MR.Q (agents/mrq.py) and what it reads from the replay: sub-trajectories, batches at chosen slots, its
+settings, the reward model's two-hot encoding, prioritised sampling, and short real runs of the loop on
+both kinds of task (tiny networks: the tests are of the algorithm's parts and the loop, not of learning;
+``test_mrq_learns_to_type_the_discrete_arrows`` is the slow learning check)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from agents_helpers import through_file
+from replay_helpers import feature_episode, goal_indices, n_step_buffer
+from tactile_braille.agents import TrainConfig, train
+from tactile_braille.agents.config import MRQConfig
+from tactile_braille.agents.mrq import MRQAgent, TwoHot
+from tactile_braille.agents.replay import SubTrajectories
+from tactile_braille.agents.report import load_run
+from tactile_braille.agents.run import read_progress
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+TINY = {"batch_size": 8, "target_every": 4, "hidden_units": 16, "state_size": 16, "state_action_size": 16,
+        "action_size": 8}  # fmt: skip
+
+
+# ---------------------------------------------------------------- the replay's side
+def three_episodes(relabel: str = "paper", horizon: int = 4, capacity: int = 100):
+    buffer = n_step_buffer(1, relabel, capacity, extras=(SubTrajectories(horizon),))
+    feature_episode(buffer, goal=1, pressed=1, steps=5, first_frame=0)  # right press: frames 0-5
+    feature_episode(buffer, goal=0, pressed=2, steps=4, first_frame=10)  # wrong press: frames 10-14
+    feature_episode(buffer, goal=3, pressed=None, steps=2, first_frame=20)  # time-out: frames 20-22
+    return buffer
+
+
+@pytest.mark.parametrize("relabel", ["paper", "all"])
+def test_a_sub_trajectory_follows_its_episode_under_the_batch_goal_and_is_masked_past_its_end(relabel):
+    batch = three_episodes(relabel).sample(3000, np.random.default_rng(0))
+    lengths, pressed = {0: 5, 10: 4, 20: 2}, {0: 1, 10: 2, 20: None}
+    for t, first, goal, reward, actions, rewards, dones, valid, frames in zip(
+        batch["actions"], batch["images"][:, 0], goal_indices(batch["goals"]), batch["rewards"],
+        batch["horizon_actions"], batch["horizon_rewards"], batch["horizon_dones"], batch["horizon_valid"],
+        batch["horizon_next_images"][:, :, 0], strict=True,
+    ):  # fmt: skip
+        start = int(first) - t
+        inside = np.arange(4) <= lengths[start] - 1 - t  # the steps left in the episode
+        np.testing.assert_array_equal(valid, inside)
+        np.testing.assert_array_equal(actions[inside], t + np.arange(4)[inside])
+        np.testing.assert_array_equal(frames[inside], first + 1 + np.arange(4)[inside])
+        last = inside & (t + np.arange(4) == lengths[start] - 1)
+        np.testing.assert_array_equal(dones, last & (pressed[start] is not None))
+        np.testing.assert_array_equal(rewards, last & (pressed[start] == goal))
+        assert rewards[0] == reward  # the batch's own reward, relabelled alike
+    assert batch["horizon_valid"][:, 3].any() and not batch["horizon_valid"].all()
+
+
+def test_a_sub_trajectory_keeps_its_episode_where_the_ring_wraps():
+    buffer = n_step_buffer(1, "all", capacity=7, extras=(SubTrajectories(3),))
+    for episode in range(5):  # 3 steps each: the ring wraps
+        feature_episode(buffer, goal=0, pressed=0, steps=3, first_frame=10 * episode)
+    batch = buffer.sample(300, np.random.default_rng(0))
+    frames, valid = batch["horizon_next_images"][:, :, 0], batch["horizon_valid"].astype(bool)
+    expected = batch["images"][:, :1] + 1 + np.arange(3)
+    assert (frames[valid] == expected[valid]).all() and (~valid).any()
+
+
+def test_a_batch_can_be_sampled_at_chosen_slots_and_bad_slots_are_refused():
+    buffer = three_episodes()
+    slots = np.array([0, 4, 9, 10])
+    batch = buffer.sample(4, np.random.default_rng(0), index=slots)
+    # slots 0-4: the first episode; 5-8 the second, 9-12 its relabelled copy; 13-14 the third
+    np.testing.assert_array_equal(batch["images"][:, 0], [0, 4, 10, 11])
+    np.testing.assert_array_equal(goal_indices(batch["goals"]), [1, 1, 2, 2])
+    with pytest.raises(ValueError, match=r"index must hold 4 slots in \[0, 15\)"):
+        buffer.sample(4, np.random.default_rng(0), index=np.array([0, 1, 2, 15]))
+    with pytest.raises(ValueError, match="index must hold 4 slots"):
+        buffer.sample(4, np.random.default_rng(0), index=np.array([0, 1]))
+
+
+@pytest.mark.parametrize("horizon", [0, 1.5, True])
+def test_a_sub_trajectory_needs_a_whole_horizon(horizon):
+    with pytest.raises(ValueError, match="horizon must be a whole number >= 1"):
+        SubTrajectories(horizon)
+
+
+# ---------------------------------------------------------------- settings and the reward model
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"target_every": 0}, "target_every must be at least 1"),
+        ({"encoder_horizon": 0}, "encoder_horizon must be at least 1"),
+        ({"reward_bins": 1}, "reward_bins must be at least 2"),
+        ({"priority_alpha": 1.5}, r"priority_alpha must be in \[0, 1\]"),
+        ({"min_priority": 0.0}, "min_priority must be positive"),
+        ({"value_learning_rate": -1e-4}, "value_learning_rate must be positive"),
+        ({"exploration_noise": -0.1}, "exploration_noise must not be negative"),
+        ({"gamma": 1.5}, r"gamma must be in \[0, 1\]"),
+    ],
+)
+def test_bad_mrq_settings_are_refused_by_name(change, message):
+    with pytest.raises(ValueError, match=message):
+        MRQConfig(**change)
+
+
+def test_mrq_refuses_the_replays_n_step_returns_it_builds_itself():
+    with pytest.raises(ValueError, match=r"replay.n_step must be 1, got 3"):
+        TrainConfig(algo="mrq", replay={"n_step": 3})
+    assert TrainConfig(algo="mrq").updates_per_step == 1
+
+
+def test_the_two_hot_encoding_puts_each_reward_between_its_two_bins():
+    two_hot = TwoHot(65, 10.0, torch.device("cpu"))
+    rewards = torch.tensor([0.0, 1.0, 0.37, -2.5, 1e6])
+    encoded = two_hot.encode(rewards)
+    torch.testing.assert_close(encoded.sum(-1), torch.ones(5))
+    assert ((encoded > 0).sum(-1) <= 2).all()
+    decoded = (encoded * two_hot.values).sum(-1)
+    torch.testing.assert_close(decoded[:4], rewards[:4])
+    assert decoded[4] == two_hot.values[-1]  # beyond the range: the last bin
+    sharp = torch.full((1, 65), -1e4)
+    sharp[0, 32] = 1e4  # the bin of 0
+    assert two_hot.cross_entropy(sharp, torch.tensor([0.0])).item() == pytest.approx(0.0, abs=1e-4)
+
+
+# ---------------------------------------------------------------- the agent in the loop
+def _run(env_datasets, tmp_path, task: str, epochs: int = 1, name: str = "run"):
+    config = TrainConfig(
+        task=task, algo="mrq", epochs=epochs, steps_per_epoch=40, start_steps=20,
+        dataset=str(env_datasets[task]), threads=1, agent=TINY, evaluation={"test_episodes": 1},
+        replay={"capacity": 500},
+    )  # fmt: skip
+    return train(config, run_dir=tmp_path / name, progress=False)
+
+
+@pytest.mark.parametrize("task", ["tactile_braille/DiscreteArrows-v0", "tactile_braille/ContinuousArrows-v0"])
+def test_mrq_trains_in_the_loop_checkpoints_and_resumes_as_if_never_stopped(env_datasets, tmp_path, task):
+    run = _run(env_datasets, tmp_path, task)
+    (row,) = read_progress(run)
+    assert int(row["updates"]) == 21  # one update per step, from the last start step on
+    for name in ("q_loss", "policy_loss", "encoder_dynamics", "encoder_reward", "encoder_done"):
+        assert np.isfinite(float(row[f"losses/{name}"])), name
+
+    _, env, agent = load_run(run)
+    assert isinstance(agent, MRQAgent)
+    assert len(agent.priorities) == 500 and agent.priorities.max() >= 1.0  # LAP's floor, set by updates
+    assert agent.counters[0] == 21 and agent.counters[1] > 0  # updates done, the replay's reward scale
+    fresh = MRQAgent(env.observation_space, env.action_space, MRQConfig(**TINY))
+    fresh.load_state_dict(through_file(agent.state_dict()))
+    torch.testing.assert_close(fresh.priorities, agent.priorities)
+    torch.testing.assert_close(fresh.counters, agent.counters)
+    observation, _ = env.reset(seed=3)
+    mine, theirs = (
+        np.asarray(a.policy_action(observation, 0, False, np.random.default_rng(0))) for a in (agent, fresh)
+    )
+    np.testing.assert_array_equal(mine, theirs)
+
+    config_file = run / "config.json"  # resumed to two epochs, it logs the rows of a run of two
+    config_file.write_text(config_file.read_text().replace('"epochs": 1,', '"epochs": 2,'))
+    train(run_dir=run, resume=True, progress=False)
+    straight = _run(env_datasets, tmp_path, task, epochs=2, name="straight")
+    assert _rows_but_time(run) == _rows_but_time(straight) and len(_rows_but_time(run)) == 2
+
+
+def _rows_but_time(run) -> list[dict]:
+    return [{k: v for k, v in row.items() if k not in ("charts/SPS", "time_s")} for row in read_progress(run)]
