@@ -25,6 +25,8 @@ from tactile_braille.evaluation.report import (
     load_records,
     original_curves,
     plot_by_task,
+    plot_typing_profiles,
+    profiles_section,
     results_table,
     source_world,
     transfer_table,
@@ -478,6 +480,24 @@ def test_the_results_pages_are_written_whole_and_again_byte_for_byte(records_tre
     before = {p: p.read_bytes() for p in [*docs.glob("results*.md"), *(docs / "results").iterdir()]}
     assert main(argv) == 0
     assert {p: p.read_bytes() for p in [*docs.glob("results*.md"), *(docs / "results").iterdir()]} == before
+
+
+def test_the_profiles_figure_draws_the_typed_rows_of_the_by_task_figure(tmp_path):
+    typed = [
+        record("DiscreteArrows-v0", "dqn", seed, [0.5, 1.0], 0.9 + 0.02 * seed, 240) for seed in range(5)
+    ]
+    untyped = [record("DiscreteAlphabet-v0", "dqn", seed, [0.1, 0.2]) for seed in range(5)]
+    few = [record("DiscreteArrows-v0", "sac_discrete", seed, [0.0, 0.5], 1.0, 400) for seed in range(3)]
+    written: set[str] = set()
+    lines = profiles_section(group(typed + untyped + few), tmp_path, "figures/", written)
+    assert (
+        written == {"typing_profiles.png"} and "![performance profiles](figures/typing_profiles.png)" in lines
+    )
+    assert (tmp_path / "typing_profiles.png").read_bytes()[:4] == b"\x89PNG"
+    assert (
+        plot_typing_profiles(group(untyped + few), tmp_path / "none.png") is None
+    )  # nothing typed to compare
+    assert profiles_section(group(few), tmp_path, "", written) == [] and not (tmp_path / "none.png").exists()
 
 
 def test_the_pages_figures_draw_nothing_without_rows(tmp_path):

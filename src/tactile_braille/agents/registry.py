@@ -194,10 +194,10 @@ for _spec in (
     AgentSpec("sac", SACConfig, "tactile_braille.agents.sac:SACAgent", {"continuous"}, "SAC"),
     AgentSpec("td3", TD3Config, "tactile_braille.agents.td3:TD3Agent", {"continuous"}, "TD3",
               updates_per_step=1),
-    AgentSpec("mrq", MRQConfig, "tactile_braille.agents.mrq:MRQAgent", {"discrete", "continuous"}, "MR.Q",
-              updates_per_step=1),
     AgentSpec("planner", PlannerConfig, "tactile_braille.agents.planner:PlannerAgent",
               {"discrete", "continuous"}, "planner", hindsight=False),
+    AgentSpec("mrq", MRQConfig, "tactile_braille.agents.mrq:MRQAgent", {"discrete", "continuous"}, "MR.Q",
+              updates_per_step=1),
 ):  # fmt: skip
     register_agent(_spec)
 PAPER_AGENTS = ("dqn", "sac_discrete", "sac", "td3")

@@ -822,6 +822,65 @@ def by_task_section(groups: dict, figures: Path, link: str, written: set[str]) -
     ]  # fmt: skip
 
 
+PROFILE_FROM = 0.8
+"""The lowest typing accuracy the report's performance profiles show (where the groups differ)."""
+
+
+def plot_typing_profiles(
+    groups: dict[tuple[str, str, str], list[RunRecord]], path: str | Path
+) -> Path | None:
+    """One panel per task: the performance profile (rliable's; :func:`~tactile_braille.evaluation.
+    statistics.performance_profile`) of the typing accuracy of every group :func:`plot_by_task` draws,
+    over its typed seeds, with a 95 % bootstrap band; the paper's accuracies dashed. None (nothing
+    written) where no such group was typed."""
+    from tactile_braille._figures import save_figure
+    from tactile_braille.evaluation.statistics import performance_profile
+
+    tasks = {task: [(algo, variant, [r.typing["accuracy"] for r in records if r.typing], records[0].track)
+                    for algo, variant, records in members]
+             for task, members in compared_groups(groups).items()}  # fmt: skip
+    tasks = {task: [m for m in members if m[2]] for task, members in tasks.items()}
+    tasks = {task: members for task, members in tasks.items() if members}
+    if not tasks:
+        return None
+    fig, axes, legends = panels_with_legends([len(members) + 1 for members in tasks.values()], height=3.0)
+    taus = np.linspace(PROFILE_FROM, 1.0, 201)
+    for ax, legend, (task, members) in zip(axes, legends, tasks.items(), strict=True):
+        for index, (algo, variant, accuracy, track) in enumerate(members):
+            share, low, high = performance_profile([accuracy], taus)
+            colour, style = f"C{index % 10}", "-" if track == "tactile" else "--"
+            ax.step(taus, share, where="post", color=colour, ls=style, lw=1.5,
+                    label=f"{_label(algo, variant)}, {track} ({len(accuracy)} seeds)")  # fmt: skip
+            ax.fill_between(taus, low, high, step="post", color=colour, alpha=0.12, lw=0)
+        for algo in PAPER_AGENTS:
+            paper = PAPER_TABLE.get(("sim", task, algo))
+            if paper is not None and paper[1] >= PROFILE_FROM:
+                ax.axvline(paper[1], color="red", ls=":", lw=0.9)
+        ax.plot([], [], color="red", ls=":", lw=0.9, label="the paper's Table III accuracies")
+        ax.set_xlim(PROFILE_FROM, 1.0)
+        ax.set_ylim(-0.03, 1.03)
+        ax.set_title(task, fontsize=9)
+        ax.set_xlabel("typing accuracy threshold")
+        ax.set_ylabel("share of seeds above it")
+        legend.legend(*ax.get_legend_handles_labels(), fontsize=6.5, loc="upper left", frameon=False)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def profiles_section(groups: dict, figures: Path, link: str, written: set[str]) -> list[str]:
+    """The report's lines on :func:`plot_typing_profiles`'s figure (none where it draws nothing)."""
+    if plot_typing_profiles(groups, figures / "typing_profiles.png") is None:
+        return []
+    written.add("typing_profiles.png")
+    return [
+        "Performance profiles of the same rows (rliable's): the share of seeds whose typing accuracy is "
+        "above each threshold, with a 95 % percentile-bootstrap band (dashed: the `proprio` track); a "
+        f"curve further up and to the right types better more reliably; thresholds from {PROFILE_FROM} "
+        f"up (a row whose seeds all type below {PROFILE_FROM} lies at 0):", "",
+        f"![performance profiles]({link}typing_profiles.png)", "",
+    ]  # fmt: skip
+
+
 def linked_figures(page: Path, link: str) -> set[str]:
     """The PNGs in ``link`` (a folder's link, ``results/``, or ``""``) that ``page`` links, if it exists."""
     if not page.exists():
@@ -911,7 +970,9 @@ def write_report(
         "", results_table(groups), "", *coverage_section(groups), *([notes.strip(), ""] if notes else []),
         f"![training curves]({link}curves.png)", "",
     ]  # fmt: skip
-    lines += by_task_section(groups, figures, link, written)
+    lines += by_task_section(groups, figures, link, written) + profiles_section(
+        groups, figures, link, written
+    )
     lines += transfer_section(transfer_dirs) + warm_start_section(warm_dirs, groups, figures, link, written)
     lines += group_sections(groups, figures, link, written)
     with atomic_path(report) as temporary:

@@ -49,6 +49,7 @@ from tactile_braille.evaluation.report import (
     original_curves,
     panels_with_legends,
     paper_cells,
+    profiles_section,
     run_bound,
     run_list,
     seed_curves,
@@ -463,7 +464,7 @@ def _see_also(headline: Path) -> str:
 
 def _figure_lines(groups: Groups, figures: Path, link: str, written: set[str]) -> list[str]:
     """The headline's figures, each under a caption: curves by task, steps per key, the presets' curves."""
-    lines = by_task_section(groups, figures, link, written)
+    lines = by_task_section(groups, figures, link, written) + profiles_section(groups, figures, link, written)
     if plot_steps_per_key(groups, figures / "steps_per_key.png") is not None:
         written.add("steps_per_key.png")
         lines += [
