@@ -800,13 +800,19 @@ def plot_by_task(groups: dict[tuple[str, str, str], list[RunRecord]], path: str 
         paper = [f"{agent_label(a)} {PAPER_TABLE[('sim', task, a)][2]}" for a in PAPER_AGENTS
                  if ("sim", task, a) in PAPER_TABLE]  # fmt: skip
         ax.axhline(0.95, color="grey", lw=0.6)
-        ax.set_title(f"{task} (paper's convergence epochs: {', '.join(paper)})", fontsize=9)
-        ax.set_xlabel("epoch (250 steps)")
-        ax.set_ylabel(f"test return, mean of {compared_seeds(task)}+ seeds")
         ax.set_ylim(-0.05, 1.05)
-        legend.legend(*ax.get_legend_handles_labels(), fontsize=6.5, loc="upper left", frameon=False)
+        _label_panel(ax, legend, f"{task} (paper's convergence epochs: {', '.join(paper)})",
+                     "epoch (250 steps)", f"test return, mean of {compared_seeds(task)}+ seeds")  # fmt: skip
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def _label_panel(ax, legend, title: str, xlabel: str, ylabel: str) -> None:
+    """A panel's title and axis labels, and its legend in the blank axes ``legend`` below it."""
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    legend.legend(*ax.get_legend_handles_labels(), fontsize=6.5, loc="upper left", frameon=False)
 
 
 def by_task_section(groups: dict, figures: Path, link: str, written: set[str]) -> list[str]:
@@ -859,10 +865,7 @@ def plot_typing_profiles(
         ax.plot([], [], color="red", ls=":", lw=0.9, label="the paper's Table III accuracies")
         ax.set_xlim(PROFILE_FROM, 1.0)
         ax.set_ylim(-0.03, 1.03)
-        ax.set_title(task, fontsize=9)
-        ax.set_xlabel("typing accuracy threshold")
-        ax.set_ylabel("share of seeds above it")
-        legend.legend(*ax.get_legend_handles_labels(), fontsize=6.5, loc="upper left", frameon=False)
+        _label_panel(ax, legend, task, "typing accuracy threshold", "share of seeds above it")
     fig.tight_layout()
     return save_figure(fig, path)
 
