@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import json
 import os
 import subprocess
 import sys
@@ -45,6 +46,22 @@ def offline_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
             "SWEEP_COMMAND must be benchmark or sweep, got 'train'",
         ),
         (("start", "ten", "results/x", "--paper"), {}, "BUDGET_S must be whole seconds, got 'ten'"),
+        (
+            ("tune", "500", "500", "DiscreteArrows-v0", "dqn"),
+            {"OUT": "/tmp"},
+            "offline_gpu_sweep.sh tune SEARCH_S",
+        ),
+        (
+            ("tune", "ten", "500", "DiscreteArrows-v0", "dqn", "4"),
+            {"OUT": "/tmp"},
+            "SEARCH_S must be whole seconds",
+        ),
+        (
+            ("tune", "500", "500", "DiscreteArrows-v0", "dqn", "0"),
+            {"OUT": "/tmp"},
+            "TRIALS must be a whole number",
+        ),
+        (("tune", "500", "500", "DiscreteArrows-v0", "dqn", "4"), {}, "OUT is not set"),
         (("collect",), {"OUT": "/tmp"}, "tools/offline_gpu_sweep.sh collect WAIT_S"),
         (("collect", "soon"), {"OUT": "/tmp"}, "WAIT_S must be whole seconds, got 'soon'"),
         (("collect", "10"), {"STATE": "/nonexistent/state"}, "OUT is not set"),
@@ -136,3 +153,39 @@ def test_offline_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env
         log = packed.extractfile("sweep.log").read().decode()
     assert {f"results/x/{trial}/typing.json", f"results/x/{trial}/progress.csv"} <= names
     assert "sweep exit status 0" in log
+
+
+@pytest.mark.slow
+def test_offline_gpu_sweep_tunes_with_workers_sharing_one_study_and_packs_the_search(env_datasets, tmp_path):
+    """The `tune` verb end to end on the CPU: two processes share the SQLite study and stop at its
+    trials (two, not one each more), then the final run of a fresh seed; all of it in tuning.tgz."""
+    copy = tmp_path / "repo"
+    (copy / "tools").mkdir(parents=True)
+    (copy / "tools" / SCRIPT.name).write_text(SCRIPT.read_text())
+    _placeholder_wheel(copy / ".whl")
+    (copy / ".data").mkdir()
+    out = tmp_path / "out"
+    out.mkdir()
+    dataset = env_datasets["tactile_braille/DiscreteArrows-v0"]
+    result = subprocess.run(
+        ["bash", str(copy / "tools" / SCRIPT.name), "tune", "240", "240", "DiscreteArrows-v0", "dqn", "2",
+         "--dataset", str(dataset)],
+        capture_output=True, text=True, timeout=600,
+        env={**os.environ, "OUT": str(out), "DEVICE": "cpu", "JOBS": "2", "STEPS": "60", "SEEDS": "5",
+             "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    with tarfile.open(out / "tuning.tgz") as packed:
+        names = set(packed.getnames())
+        summary = json.loads(packed.extractfile("runs/tune/DiscreteArrows-v0__dqn.json").read())
+        final = json.loads(
+            packed.extractfile("results/leaderboard/sb3-tuned/DiscreteArrows-v0__dqn__5.json").read()
+        )
+    assert {
+        "runs/tune/DiscreteArrows-v0__dqn.db",
+        "./search_0.log",
+        "./search_1.log",
+        "./final_5.log",
+    } <= names
+    assert summary["trials"] == 2 and len(summary["trial_log"]) == 2 and summary["steps"] == 60
+    assert final["seed"] == 5 and final["tuning"]["trials"] == 2 and final["budget"]["env_steps"] == 60

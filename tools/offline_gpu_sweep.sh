@@ -21,6 +21,15 @@
 #       on the same node, later: waits up to WAIT_S s for the started sweep, then $OUT/records.tgz and
 #       $OUT/epochs.tsv as `run` makes them, and $OUT/progress.tgz (every trial's progress.csv); a
 #       sweep still running is left to run on
+#   tools/offline_gpu_sweep.sh tune SEARCH_S FINAL_S TASK ALGO TRIALS [ARGS...]
+#       on the node, in one job: the Stable-Baselines3 search of `python -m tactile_braille.baselines.sb3
+#       tune TASK ALGO --trials TRIALS` on CUDA (DEVICE to change) by min(JOBS, TRIALS) processes sharing
+#       its study in STUDY (default runs/tune: carry it to go on with a search begun elsewhere), stopped
+#       after SEARCH_S seconds (a trial stopped there is run again by the next search); then the best
+#       settings on SEEDS (default 0-4), a process each, stopped after FINAL_S, into RESULTS (default
+#       results/leaderboard/sb3-tuned). ARGS go to both (--dataset FILE); STEPS, if set, is the search's
+#       budget in place of the task's official one. Then $OUT/tuning.tgz: the study, its summary, the
+#       results files and each process's log.
 #
 # SWEEP_COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its
 # settings and --variant NAME among the arguments).
@@ -33,7 +42,7 @@ cd "$(dirname "$0")/.."
 STATE=${STATE:-/tmp/offline_gpu_sweep}
 SWEEP_COMMAND=${SWEEP_COMMAND:-benchmark}
 
-usage() { sed -n '2,29p' "$0" >&2; exit 2; }
+usage() { sed -n '2,38p' "$0" >&2; exit 2; }
 fail() { echo "$*" >&2; exit 2; }
 
 prepare() {
@@ -43,6 +52,15 @@ prepare() {
     farama=$("$python" -c "import importlib.metadata as m; print(m.version('farama-notifications'))")
     "$python" -m pip download -q --no-deps --only-binary=:all: -d .whl \
         "gymnasium==$gym" "farama-notifications==$farama"
+    # the tuning's: Stable-Baselines3, SB3-Contrib, Optuna and what the node lacks of their needs
+    # (SQLAlchemy's wheel is compiled: the node's Python 3.12 and platform)
+    local package versions=()
+    for package in stable-baselines3 sb3-contrib optuna alembic sqlalchemy mako colorlog; do
+        versions+=("$package==$("$python" -c "import importlib.metadata as m; print(m.version('$package'))")")
+    done
+    "$python" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+        --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 \
+        -d .whl "${versions[@]}"
     "$python" -m tactile_braille.cli data  # the default datasets, generated or checked in the cache
     local cache
     cache=$("$python" -c "from tactile_braille.datasets.cache import data_dir; print(data_dir())")
@@ -152,11 +170,44 @@ collect() {
     cat "$OUT/epochs.tsv"
 }
 
+tune() {  # SEARCH_S FINAL_S TASK ALGO TRIALS [ARGS...]
+    [ $# -ge 5 ] || usage
+    check_budget "$1" SEARCH_S
+    check_budget "$2" FINAL_S
+    [[ $5 =~ ^[1-9][0-9]*$ ]] || fail "TRIALS must be a whole number of trials, got '$5'"
+    [ -n "${OUT:-}" ] || fail "OUT is not set: where should the records go?"
+    local search=$1 final=$2 task=$3 algo=$4 trials=$5
+    shift 5
+    setup
+    local study=${STUDY:-runs/tune} results=${RESULTS:-results/leaderboard/sb3-tuned} logs i seed
+    local -a steps=()
+    [ -z "${STEPS:-}" ] || steps=(--steps "$STEPS")
+    logs=$(mktemp -d)
+    local jobs=$((${JOBS:-14} < trials ? ${JOBS:-14} : trials))
+    for ((i = 0; i < jobs; i++)); do  # SIGINT: a stopped trial is marked failed, not left running
+        timeout --signal=INT --kill-after=20 "$search" "$PYTHON" -m tactile_braille.baselines.sb3 tune \
+            "$task" "$algo" --trials "$trials" --study "$study" --device "${DEVICE:-cuda}" "${steps[@]}" "$@" \
+            > "$logs/search_$i.log" 2>&1 &
+        sleep 2  # each takes its trial before the next counts them
+    done
+    wait || true
+    for seed in ${SEEDS:-0 1 2 3 4}; do
+        timeout --signal=INT --kill-after=20 "$final" "$PYTHON" -m tactile_braille.baselines.sb3 run \
+            "$task" "$algo" --study "$study" --seeds "$seed" --into "$results" --device "${DEVICE:-cuda}" "$@" \
+            > "$logs/final_$seed.log" 2>&1 &
+    done
+    wait || true
+    mkdir -p "$results"
+    tar czf "$OUT/tuning.tgz" "$study/${task}__${algo}".* "$results" -C "$logs" .
+    tail -n 3 "$logs"/*.log
+}
+
 case ${1:-} in
     prepare) prepare ;;
     run) shift; run "$@" ;;
     start) shift; start "$@" ;;
     collect) shift; collect "$@" ;;
+    tune) shift; tune "$@" ;;
     _sweep) shift; dest=$1; shift; sweep "$dest" "$@" ;;
     *) usage ;;
 esac

@@ -158,9 +158,9 @@ def check_algo(task: str, algo: str) -> None:
         raise ValueError(f"{algo} takes {takes} actions; {task}'s are {kind}: use one of {able}")
 
 
-def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None):
+def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None, device="cpu"):
     """An SB3 (or SB3-Contrib) model of ``algo`` with ``settings`` (:data:`DEFAULTS`' names) on ``task``,
-    its replay holding the whole run."""
+    its replay holding the whole run, its networks on ``device``."""
     from stable_baselines3 import HerReplayBuffer
 
     check_algo(task, algo)
@@ -173,7 +173,7 @@ def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, data
     model_class = ALGORITHMS[algo].model_class()
     return model_class(
         "MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=her,
-        buffer_size=max(steps, 1), seed=seed, device="cpu", verbose=0, **settings,
+        buffer_size=max(steps, 1), seed=seed, device=device, verbose=0, **settings,
     )  # fmt: skip
 
 
@@ -183,14 +183,16 @@ def score(model, task: str, dataset=None) -> TypingReport:
                            dataset=dataset)  # fmt: skip
 
 
-def train(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None, checks=(), check=None):
-    """Train for ``steps`` environment steps; ``check(steps_so_far, report)`` is called with a typing
-    report after each step count in ``checks`` (a search's pruning). Returns (model, seconds)."""
+def train(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None, checks=(), check=None,
+          device="cpu"):  # fmt: skip
+    """Train for ``steps`` environment steps on ``device`` (one CPU thread); ``check(steps_so_far,
+    report)`` is called with a typing report after each step count in ``checks`` (a search's pruning).
+    Returns (model, seconds)."""
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
     torch.set_num_threads(1)
-    model = make_model(task, algo, settings, steps, seed, dataset)
+    model = make_model(task, algo, settings, steps, seed, dataset, device)
 
     class Checks(BaseCallback):
         def _on_step(self) -> bool:
@@ -239,10 +241,11 @@ def _suggest(trial, space: dict[str, Range | Choice]) -> dict:
 
 
 def tune(task: str, algo: str, trials: int, study_dir: Path, seed: int = TUNING_SEEDS[0], steps=None,
-         dataset=None) -> dict:  # fmt: skip
-    """Run the search until the study holds ``trials`` finished or pruned trials (the module docstring);
-    returns :func:`summary`, also written beside the study. A study searches with one seed and one
-    budget: another is refused."""
+         dataset=None, device: str = "cpu") -> dict:  # fmt: skip
+    """Run the search until the study holds ``trials`` finished or pruned trials, counting those other
+    processes are running (the module docstring); returns :func:`summary`, also written beside the
+    study. A study searches with one seed and one budget: another is refused. ``device``: where the
+    networks train (the budget and the search are the same on any)."""
     import optuna
 
     check_algo(task, algo)
@@ -275,14 +278,17 @@ def tune(task: str, algo: str, trials: int, study_dir: Path, seed: int = TUNING_
             if trial.should_prune():
                 raise optuna.TrialPruned()
 
-        model, seconds = train(task, algo, settings, steps, seed, dataset, checks, check)
+        model, seconds = train(task, algo, settings, steps, seed, dataset, checks, check, device)
         report = score(model, task, dataset)
         trial.set_user_attr("accuracy", report.accuracy)
         trial.set_user_attr("total_steps", report.total_steps)
         trial.set_user_attr("minutes", round(seconds / 60, 2))
         return objective(report)
 
-    while len(_finished(study)) < trials:
+    while True:
+        optuna.storages.fail_stale_trials(study)  # a killed process's trial is run again
+        if len(_finished(study)) + sum(t.state.name == "RUNNING" for t in study.trials) >= trials:
+            break
         study.optimize(run_trial, n_trials=1)
         _write_summary(path, summary(study, task, algo))
     result = summary(study, task, algo)
@@ -322,15 +328,21 @@ def _write_summary(study_path: Path, content: dict) -> None:
         temporary.write_text(json.dumps(content, indent=2, default=_plain) + "\n")
 
 
+def _where(device: str) -> str:
+    return "one CPU thread" if device == "cpu" else f"{device} and one CPU thread"
+
+
 def _plain(value):
     return value.item() if isinstance(value, np.generic) else str(value)
 
 
 # ------------------------------------------------------------------ final runs
-def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None) -> list[Path]:
+def run_seeds(
+    task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None, device: str = "cpu"
+) -> list[Path]:
     """The best trial's settings trained on each of ``seeds`` (none a tuning seed) at the budget the
-    search used; one results file each in ``into``. A file that exists is kept and a seed another
-    process is training is left to it, so calls can go on side by side and after a stop."""
+    search used, on ``device``; one results file each in ``into``. A file that exists is kept and a seed
+    another process is training is left to it, so calls can go on side by side and after a stop."""
     import optuna
 
     from tactile_braille._io import LockedError, exclusive_lock
@@ -354,13 +366,12 @@ def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=
         try:
             with exclusive_lock(path.parent / f".{target.name}.lock", f"the run of {target}"):
                 if not target.exists():
-                    model, seconds = train(
-                        task, algo, tuning["best"]["params"], tuning["steps"], seed, dataset
-                    )
+                    model, seconds = train(task, algo, tuning["best"]["params"], tuning["steps"], seed,
+                                           dataset, device=device)  # fmt: skip
                     result = make_result(
                         score(model, task, dataset), method=f"{ALGORITHMS[algo].label} (tuned)", seed=seed,
                         env_steps=tuning["steps"],
-                        notes=f"tactile_braille.baselines.sb3; {seconds / 60:.1f} min on one CPU thread",
+                        notes=f"tactile_braille.baselines.sb3; {seconds / 60:.1f} min on {_where(device)}",
                         tuning=tuning,
                     )  # fmt: skip
                     write_result(result, target)
@@ -383,6 +394,7 @@ def main(argv=None) -> int:
             "--study", type=Path, required=True, help="folder of the search's study (SQLite)"
         )
         command.add_argument("--dataset", type=Path, help="the dataset backend's file (default: cached)")
+        command.add_argument("--device", default="cpu", help="where the networks train: cpu (default), cuda")
     commands.choices["tune"].add_argument("--trials", type=int, required=True, help="trials to finish in all")
     commands.choices["tune"].add_argument("--seed", type=int, default=TUNING_SEEDS[0], help="the tuning seed")
     commands.choices["tune"].add_argument(
@@ -394,7 +406,8 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     if args.command == "tune":
-        found = tune(args.task, args.algo, args.trials, args.study, args.seed, args.steps, args.dataset)
+        found = tune(args.task, args.algo, args.trials, args.study, args.seed, args.steps, args.dataset,
+                     args.device)  # fmt: skip
         best = found["best"]
         if best is None:
             print(f"{found['trials']} trials finished, none complete (all pruned)")
@@ -404,7 +417,9 @@ def main(argv=None) -> int:
                 f"{best['total_steps']} steps with {best['params']}"
             )
     else:
-        for path in run_seeds(args.task, args.algo, args.study, args.seeds, args.into, args.dataset):
+        for path in run_seeds(
+            args.task, args.algo, args.study, args.seeds, args.into, args.dataset, args.device
+        ):
             report = json.loads(path.read_text())["report"]
             print(f"{path}: accuracy {report['accuracy']:.3f} in {report['total_steps']} steps")
     return 0
