@@ -5,16 +5,25 @@ both kinds of task (tiny networks: the tests are of the algorithm's parts and th
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from agents_helpers import through_file
-from replay_helpers import feature_episode, goal_indices, n_step_buffer
+from replay_helpers import (
+    GOALS,
+    PREVIOUS,
+    Frames,
+    feature_episode,
+    goal_indices,
+    n_step_buffer,
+    replay_observation,
+)
 from tactile_braille.agents import TrainConfig, train
 from tactile_braille.agents.config import MRQConfig
 from tactile_braille.agents.mrq import MRQAgent, TwoHot
-from tactile_braille.agents.replay import SubTrajectories
+from tactile_braille.agents.replay import EpisodeReplayBuffer, SubTrajectories
 from tactile_braille.agents.report import load_run
 from tactile_braille.agents.run import read_progress
 
@@ -77,6 +86,44 @@ def test_a_batch_can_be_sampled_at_chosen_slots_and_bad_slots_are_refused():
         buffer.sample(4, np.random.default_rng(0), index=np.array([0, 1]))
 
 
+def test_sub_trajectories_refuse_a_replay_that_shifts_images():
+    buffer = three_episodes()
+    buffer.shift = 2
+    with pytest.raises(ValueError, match="not shifted by the replay"):
+        buffer.sample(4, np.random.default_rng(0))
+
+
+def test_mrq_shifts_every_image_of_its_batches_by_up_to_image_shift_pixels():
+    box = lambda size: gym.spaces.Box(0.0, 1.0, (size,), np.float32)  # noqa: E731
+    observation_space = gym.spaces.Dict({
+        "observation": gym.spaces.Box(0, 255, (100, 100, 1), np.uint8), "desired_goal": box(GOALS),
+        "achieved_goal": box(GOALS), "previous_action": box(PREVIOUS),
+    })  # fmt: skip
+    action_space = gym.spaces.Discrete(5)
+    buffer = EpisodeReplayBuffer(100, GOALS, (), PREVIOUS, extras=(SubTrajectories(5),))
+    frames = Frames()
+    for _ in range(3):
+        buffer.start_episode(replay_observation(frames(), 0))
+        for step in range(4):
+            buffer.add_step(step, 0.0, replay_observation(frames(), 0), False)
+        buffer.end_episode()
+    for pixels in (0, 2):
+        agent = MRQAgent(observation_space, action_space, MRQConfig(**TINY, image_shift=pixels))
+        agent._mark_new(buffer)
+        batch = agent._draw(buffer, 16, np.random.default_rng(pixels))
+        originals = buffer.store.observations(buffer.frame_index[batch["slots"], 0])
+        shifted = [any((_shift(o, dr, dc) == b).all() for dr in range(-2, 3) for dc in range(-2, 3))
+                   for o, b in zip(originals, batch["images"], strict=True)]  # fmt: skip
+        assert all(shifted) and "next_images" not in batch
+        assert (batch["images"] == originals).all() == (pixels == 0)
+        assert batch["horizon_next_images"].shape == (16, 5, 1, 100, 100)
+
+
+def _shift(image: np.ndarray, rows: int, columns: int) -> np.ndarray:
+    padded = np.pad(image, ((0, 0), (2, 2), (2, 2)), mode="edge")
+    return padded[:, 2 + rows : 102 + rows, 2 + columns : 102 + columns]
+
+
 @pytest.mark.parametrize("horizon", [0, 1.5, True])
 def test_a_sub_trajectory_needs_a_whole_horizon(horizon):
     with pytest.raises(ValueError, match="horizon must be a whole number >= 1"):
@@ -102,9 +149,11 @@ def test_bad_mrq_settings_are_refused_by_name(change, message):
         MRQConfig(**change)
 
 
-def test_mrq_refuses_the_replays_n_step_returns_it_builds_itself():
+def test_mrq_refuses_the_replays_n_step_returns_and_shifts_it_makes_itself():
     with pytest.raises(ValueError, match=r"replay.n_step must be 1, got 3"):
         TrainConfig(algo="mrq", replay={"n_step": 3})
+    with pytest.raises(ValueError, match=r"agent.image_shift\): replay.shift must be 0, got 2"):
+        TrainConfig(algo="mrq", replay={"shift": 2})
     assert TrainConfig(algo="mrq").updates_per_step == 1
 
 

@@ -436,6 +436,8 @@ class MRQConfig(AgentConfig):
         pre_activation_weight: penalty on the policy's squared pre-activations.
         reward_bins: bins of the reward model's two-hot encoding.
         reward_bound: the bins span symexp of [-reward_bound, reward_bound].
+        image_shift: every image of a batch, the sub-trajectories' too, is moved by up to this many
+            pixels along each axis, its edge repeated (MR.Q's augmentation; 0: none; images only).
     """
 
     gamma: float = 0.99
@@ -464,12 +466,14 @@ class MRQConfig(AgentConfig):
     pre_activation_weight: float = 1e-5
     reward_bins: int = 65
     reward_bound: float = 10.0
+    image_shift: int = 4
 
     def __post_init__(self) -> None:
         super().__post_init__()
         _at_least(self, 1, "target_every", "value_horizon", "encoder_horizon", "state_size", "action_size",
                   "state_action_size", "hidden_units")  # fmt: skip
         _at_least(self, 2, "reward_bins")
+        _at_least(self, 0, "image_shift")
         problems = [
             f"{name} must be positive, got {getattr(self, name)}"
             for name in ("encoder_learning_rate", "value_learning_rate", "policy_learning_rate",
@@ -491,6 +495,15 @@ class MRQConfig(AgentConfig):
             raise ValueError(
                 f"mrq builds its own {self.value_horizon}-step returns from sub-trajectories "
                 f"(agent.value_horizon): replay.n_step must be 1, got {run.replay.n_step}"
+            )
+        if run.replay.shift:
+            raise ValueError(
+                f"mrq shifts its batches' images itself (agent.image_shift): replay.shift must be 0, "
+                f"got {run.replay.shift}"
+            )
+        if self.image_shift and run.touch.enabled:
+            raise ValueError(
+                "agent.image_shift moves images, and the touch encoder gives features: set it to 0"
             )
 
 

@@ -33,7 +33,7 @@ from torch.nn import functional as F
 from tactile_braille.agents.common import Agent, observation_features, spaces_sizes
 from tactile_braille.agents.config import MRQConfig
 from tactile_braille.agents.networks import observation_tensors
-from tactile_braille.agents.replay import SubTrajectories
+from tactile_braille.agents.replay import SubTrajectories, random_shift
 
 
 # ================================================================= networks
@@ -302,10 +302,22 @@ class MRQAgent(Agent):
         self.counters[4], self.counters[5] = buffer.next_slot, buffer.size
 
     def _draw(self, buffer, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """A batch at slots drawn by priority, its images shifted (``image_shift``)."""
         cumulative = np.cumsum(self.priorities[: buffer.size].numpy(), dtype=np.float64)
         slots = np.searchsorted(cumulative, rng.random(batch_size) * cumulative[-1], side="right")
         slots = np.minimum(slots, buffer.size - 1)
-        return {**buffer.sample(batch_size, rng, index=slots), "slots": slots}
+        batch = buffer.sample(batch_size, rng, index=slots)
+        pixels = self.config.image_shift
+        if pixels:
+            if batch["images"].ndim != 4:
+                raise ValueError(f"image_shift={pixels} moves images, but this replay serves features")
+            batch["images"] = random_shift(batch["images"], pixels, rng)
+            frames = batch["horizon_next_images"]
+            batch["horizon_next_images"] = random_shift(
+                frames.reshape(-1, *frames.shape[2:]), pixels, rng
+            ).reshape(frames.shape)
+        del batch["next_images"]  # MR.Q bootstraps from the sub-trajectories' frames
+        return {**batch, "slots": slots}
 
     # ------------------------------------------------------------- updates
     def _actions(self, actions: torch.Tensor) -> torch.Tensor:

@@ -502,9 +502,12 @@ class SubTrajectories(BatchExtra):
             np.repeat(goals, self.horizon, axis=0), buffer.rewards[flat], buffer.achieved[flat]
         )
         rewards[0 :: self.horizon] = np.asarray(sampled.rewards, dtype=np.float32)  # the batch's own
+        if buffer.shift:
+            raise ValueError(
+                f"sub-trajectories' frames are not shifted by the replay (shift={buffer.shift}): an agent "
+                "that reads them shifts every image of its batches itself"
+            )
         next_frames = sampled.observations(buffer.frame_index[flat, 1])
-        if buffer.shift and buffer.cache.features is None:  # moved as the batch's own images are
-            next_frames = random_shift(next_frames, buffer.shift, rng)
         batch = len(index)
         return {
             "horizon_actions": buffer.actions[steps],
