@@ -82,6 +82,8 @@ def test_every_setting_of_a_run_can_be_set_from_the_command_line(algo):
             value, words = 1, ["1"]
         if name == "replay.shift":  # given as its default: the touch encoder's features refuse shifts
             value, words = 0, ["0"]
+        if name == "agent.image_shift":  # MR.Q's; none, as the touch encoder's features refuse shifts
+            value, words = 0, ["0"]
         if name == "agent.goal_difference":  # given as its default: it refuses goal heads (test_algorithms)
             value, words = 0, ["0"]
         if name == "agent.return_bound":  # given as its default: it refuses all-goals updates
