@@ -118,13 +118,8 @@ def _placeholder_wheel(folder: Path) -> Path:
     return wheel
 
 
-@pytest.mark.slow
-def test_offline_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env_datasets, tmp_path):
-    """SWEEP_COMMAND=sweep end to end on the CPU: install, a variant's trial, archive, records.tgz.
-
-    The GPU node's only differences are DEVICE and the wheels carried (here a placeholder, as
-    gymnasium is already installed); about 20 s, so `make test-slow`.
-    """
+def _node_checkout(tmp_path: Path) -> tuple[Path, Path]:
+    """A checkout as a node gets it (the script, a carried wheel, a .data folder), and an empty $OUT."""
     copy = tmp_path / "repo"
     (copy / "tools").mkdir(parents=True)
     (copy / "tools" / SCRIPT.name).write_text(SCRIPT.read_text())
@@ -132,6 +127,17 @@ def test_offline_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env
     (copy / ".data").mkdir()
     out = tmp_path / "out"
     out.mkdir()
+    return copy, out
+
+
+@pytest.mark.slow
+def test_offline_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env_datasets, tmp_path):
+    """SWEEP_COMMAND=sweep end to end on the CPU: install, a variant's trial, archive, records.tgz.
+
+    The GPU node's only differences are DEVICE and the wheels carried (here a placeholder, as
+    gymnasium is already installed); about 20 s, so `make test-slow`.
+    """
+    copy, out = _node_checkout(tmp_path)
     dataset = env_datasets["tactile_braille/DiscreteArrows-v0"]
     result = subprocess.run(
         ["bash", str(copy / "tools" / SCRIPT.name), "run", "300", "results/x",
@@ -159,13 +165,7 @@ def test_offline_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env
 def test_offline_gpu_sweep_tunes_with_workers_sharing_one_study_and_packs_the_search(env_datasets, tmp_path):
     """The `tune` verb end to end on the CPU: two processes share the SQLite study and stop at its
     trials (two, not one each more), then the final run of a fresh seed; all of it in tuning.tgz."""
-    copy = tmp_path / "repo"
-    (copy / "tools").mkdir(parents=True)
-    (copy / "tools" / SCRIPT.name).write_text(SCRIPT.read_text())
-    _placeholder_wheel(copy / ".whl")
-    (copy / ".data").mkdir()
-    out = tmp_path / "out"
-    out.mkdir()
+    copy, out = _node_checkout(tmp_path)
     dataset = env_datasets["tactile_braille/DiscreteArrows-v0"]
     result = subprocess.run(
         ["bash", str(copy / "tools" / SCRIPT.name), "tune", "240", "240", "DiscreteArrows-v0", "dqn", "2",
