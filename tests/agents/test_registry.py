@@ -36,18 +36,10 @@ def test_the_projects_agents_are_registered_with_their_kinds_labels_and_loaders(
     assert agent_names() == ("dqn", "sac_discrete", "sac", "td3", "planner", "mrq")
     kinds = {name: sorted(agent_spec(name).actions) for name in agent_names()}
     assert kinds["dqn"] == kinds["sac_discrete"] == ["discrete"]
-    assert kinds["sac"] == kinds["td3"] == ["continuous"] and kinds["planner"] == kinds["mrq"] == [
-        "continuous",
-        "discrete",
-    ]
-    assert [agent_label(name) for name in agent_names()] == [
-        "DQN",
-        "SAC_DISC",
-        "SAC",
-        "TD3",
-        "planner",
-        "MR.Q",
-    ]
+    assert kinds["sac"] == kinds["td3"] == ["continuous"]
+    assert kinds["planner"] == kinds["mrq"] == ["continuous", "discrete"]
+    labels = [agent_label(name) for name in agent_names()]
+    assert labels == ["DQN", "SAC_DISC", "SAC", "TD3", "planner", "MR.Q"]
     for name in agent_names():
         agent_class = agent_spec(name).agent_class
         assert issubclass(agent_class, Agent) and agent_class.__name__.endswith("Agent")
