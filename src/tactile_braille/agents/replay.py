@@ -366,7 +366,6 @@ class Sampled(NamedTuple):
     frames: np.ndarray  # (B, 2) frame slots: the observation and the frame the target bootstraps from
     goals: np.ndarray  # (B, goal_size) the goals the batch was relabelled to
     observations: Callable[[np.ndarray], np.ndarray]  # frame slots -> images or encoder features
-    rewards: np.ndarray  # (B,) each transition's own reward under its batch goal (one step)
 
 
 class BatchExtra:
@@ -493,6 +492,11 @@ class SubTrajectories(BatchExtra):
         self.horizon = horizon
 
     def add(self, buffer, sampled, rng):
+        if buffer.shift:
+            raise ValueError(
+                f"sub-trajectories' frames are not shifted by the replay (shift={buffer.shift}): an agent "
+                "that reads them shifts every image of its batches itself"
+            )
         index, goals = sampled.index, sampled.goals
         offsets = np.arange(self.horizon)
         steps = (index[:, None] + offsets) % buffer.capacity  # (B, H)
@@ -501,12 +505,6 @@ class SubTrajectories(BatchExtra):
         rewards = buffer.relabelling.rewards(
             np.repeat(goals, self.horizon, axis=0), buffer.rewards[flat], buffer.achieved[flat]
         )
-        rewards[0 :: self.horizon] = np.asarray(sampled.rewards, dtype=np.float32)  # the batch's own
-        if buffer.shift:
-            raise ValueError(
-                f"sub-trajectories' frames are not shifted by the replay (shift={buffer.shift}): an agent "
-                "that reads them shifts every image of its batches itself"
-            )
         next_frames = sampled.observations(buffer.frame_index[flat, 1])
         batch = len(index)
         return {
@@ -764,7 +762,7 @@ class EpisodeReplayBuffer:
         goals, rewards = self.relabelling.sampled(
             self.goals[index], self.rewards[index], self.achieved[index], self.finals[index], rng
         )
-        last, step_rewards = index, rewards  # the transition whose next frame the target bootstraps from
+        last = index  # the transition whose next frame the target bootstraps from
         if self.n_step > 1:
             rewards, last, steps = self._n_step_returns(index, goals, rewards)
         frames = np.stack([self.frame_index[index, 0], self.frame_index[last, 1]], axis=1)
@@ -781,7 +779,7 @@ class EpisodeReplayBuffer:
         }
         if self.n_step > 1:
             batch["steps"] = steps
-        sampled = Sampled(index, last, frames, goals, observations, step_rewards)
+        sampled = Sampled(index, last, frames, goals, observations)
         for extra in self.extras:
             batch.update(extra.add(self, sampled, rng))
         if self.shift:
