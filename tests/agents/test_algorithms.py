@@ -797,3 +797,64 @@ def test_all_goals_is_refused_with_n_step_returns_or_goal_positions(algo):
     for name in ("all_goals", "goal_heads"):
         with pytest.raises(ValueError, match=rf"agent\.{name} reads the goal as a one-hot alone"):
             TrainConfig(**{**base, "agent": {name: True}}, track="proprio", touch=touch)
+
+
+# ---------------------------------------------------------------- SAC's next key
+def test_sac_s_next_key_adds_the_value_of_a_next_key_to_the_targets_of_right_presses(tasks, monkeypatch):
+    """With ``next_key`` the critics' target of a press of the goal (reward 1, done) gains that share of
+    the discounted soft value of the batch's next goal at the next frame; every other target is the
+    plain agent's, for the same weights and draws."""
+    from tactile_braille.agents import sac as sac_module
+
+    data = make_batch("sac", tasks, size=16)
+    keys = data["goals"].shape[1]
+    data["next_goals"] = np.eye(keys, dtype=np.float32)[(data["goals"].argmax(-1) + 1) % keys]
+    chained = build("sac", tasks, next_key=0.5)
+    plain = build("sac", tasks)
+    assert type(chained).replay_extras(chained.config)[-1].__class__.__name__ == "NextGoals"
+    assert not type(plain).replay_extras(plain.config)
+    targets, values = {}, []
+    original = chained._next_key_value
+
+    def spy(*args):
+        values.append(original(*args))
+        return values[-1]
+
+    monkeypatch.setattr(chained, "_next_key_value", spy)
+    for name, agent in (("plain", plain), ("chained", chained)):
+
+        def mse(prediction, target, name=name):
+            targets.setdefault(name, target.detach().clone())
+            return F.mse_loss(prediction, target)
+
+        monkeypatch.setattr(sac_module, "F", types.SimpleNamespace(mse_loss=mse))
+        torch.manual_seed(7)
+        agent.update(data)
+    right = torch.as_tensor(data["rewards"] * data["dones"]) > 0
+    assert right.any() and (~right).any()
+    assert torch.equal(targets["chained"][~right], targets["plain"][~right])
+    torch.testing.assert_close(targets["chained"][right], targets["plain"][right] + values[0][right])
+    # The value is half the discounted soft value under the next goals, from the target critics.
+    t = chained.tensors(data)
+    torch.manual_seed(11)
+    again = original(t, torch.tensor(0.0), ())
+    torch.manual_seed(11)
+    actions, _, _ = chained.actor(t["next_images"], t["next_goals"], t["next_previous_actions"])
+    state = (t["next_images"], t["next_goals"], t["next_previous_actions"])
+    expected = 0.5 * 0.95 * torch.min(*(target(*state, actions) for target in chained.targets))
+    torch.testing.assert_close(again, expected)
+
+
+@pytest.mark.parametrize(
+    ("agent", "replay", "message"),
+    [
+        ({"next_key": 1.5}, {}, r"next_key is a share of a value: in \[0, 1\], got 1.5"),
+        ({"next_key": 0.5, "all_goals": True}, {}, "set agent.all_goals off"),
+        ({"next_key": 0.5}, {"n_step": 3}, "replay.n_step=1"),
+    ],
+)
+def test_sac_s_next_key_refuses_what_it_cannot_value(agent, replay, message):
+    from tactile_braille.agents.config import ReplayConfig, SACConfig, TrainConfig
+
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(task=CONTINUOUS_TASK, algo="sac", agent=SACConfig(**agent), replay=ReplayConfig(**replay))

@@ -12,7 +12,7 @@ import pytest
 
 from tactile_braille.envs.oracle import PoseScript
 from tactile_braille.evaluation import bounds
-from tactile_braille.evaluation.bounds import RASTER_MM, _ContinuousWorld, typing_bound
+from tactile_braille.evaluation.bounds import RASTER_MM, KeyByKeyTypist, _ContinuousWorld, typing_bound
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 from tactile_braille.evaluation.scoring import evaluate_policy
 
@@ -67,16 +67,17 @@ class EdgePresser:
     """Presses the goal at the nearest raster cell of its press region, at a depth that presses it there:
     a policy that knows the press regions the bound is computed from."""
 
-    def __init__(self, env: gym.Env, world: _ContinuousWorld) -> None:
+    def __init__(self, env: gym.Env, world: _ContinuousWorld, margin: bool = False) -> None:
         self.env, self.world = env, world
         braille = env.unwrapped
         self.backend, self.task = braille._core.backend, braille.task
+        self.cells = world.regions if margin else world.pressing  # with a margin: its shrunk regions
 
     def policy_action(self, observation, step, explore, rng, deterministic=False):
         braille = self.env.unwrapped
         core = braille._core
         goal = braille.goal_keys[int(core.goal[0])]
-        cells = np.argwhere(self.world.pressing[goal])
+        cells = np.argwhere(self.cells[goal])
         centres = self.world.low + (cells + 0.5) * RASTER_MM
         here = core.position_mm[0]
         target = centres[np.abs(centres - here).max(axis=1).argmin()]
@@ -109,6 +110,109 @@ def test_the_continuous_bound_is_tight_a_policy_that_presses_at_the_region_edge_
         gaps.append(typed.total_steps - bound)
     # Never below the bound; above it by at most the raster's rounding (one step), and mostly not at all.
     assert min(gaps) >= 0 and max(gaps) <= 1 and np.mean(gaps) < 0.2, gaps
+
+
+@pytest.mark.parametrize("task", CONTINUOUS)
+def test_a_margin_keeps_every_press_that_far_inside_and_the_bound_is_tight_for_such_presses(
+    env_datasets, task
+):
+    """With ``margin_mm`` the bound counts presses whose every point within the margin presses the key: a
+    policy that presses at the nearest such cell meets it (within the raster's rounding), and presses
+    nowhere nearer an edge; the bound only grows with the margin."""
+    env = gym.make(task, dataset=env_datasets[task])
+    braille = env.unwrapped
+    margin = 1.0
+    world = _ContinuousWorld(braille.task, braille._core.backend, braille._core, round(margin / RASTER_MM))
+    policy = EdgePresser(env, world, margin=True)
+    keys, gaps, presses = braille.goal_keys, [], []
+    original = policy.policy_action
+
+    def act(*args, **kwargs):
+        action = original(*args, **kwargs)
+        if action[-1] > -1.0:  # a press: where it lands
+            presses.append(braille._core.position_mm[0] + action[:2] * braille.task.max_move_mm)
+        return action
+
+    policy.policy_action = act
+    for seed in range(12):
+        sequence = (keys[seed % len(keys)],)
+        typed = type_sequences(policy, env, [sequence], seed=seed)
+        assert typed.typed == [[sequence[0]]]
+        bound = typing_bound(task, [sequence], seed=seed, dataset=env_datasets[task], margin_mm=margin)
+        assert bound >= typing_bound(task, [sequence], seed=seed, dataset=env_datasets[task])
+        gaps.append(typed.total_steps - bound)
+        # Every point around the press, out to the margin (less the raster's rounding), presses the goal
+        # at some depth, as the regions are defined.
+        x, y = presses[-1] + braille.task.frame_origin_mm
+        offsets = np.linspace(-(margin - RASTER_MM / 2), margin - RASTER_MM / 2, 4)
+        ax, ay = np.meshgrid(x + offsets, y + offsets, indexing="ij")
+        backend = braille._core.backend
+        pressed = np.stack([backend.pressed_codes(ax, ay, depth) for depth in backend.grid_depths_mm])
+        assert (pressed == braille.layout.key(sequence[0]).index).any(axis=0).all()
+    assert min(gaps) >= 0 and max(gaps) <= 1, gaps
+    sequences = paper_sequences(braille.task.keys)[:3]
+    margins = [
+        typing_bound(task, sequences, seed=1, dataset=env_datasets[task], margin_mm=m) for m in (0, 1, 2)
+    ]
+    assert margins == sorted(margins)
+
+
+@pytest.mark.parametrize("task", CONTINUOUS)
+def test_the_key_by_key_typist_types_every_key_between_the_bound_and_the_centre_seeking_script(
+    env_datasets, task
+):
+    """It presses right, never below the bound with its margin, never above the script that presses at
+    key centres; and each of its presses lies the margin inside the press region."""
+    env = gym.make(task, dataset=env_datasets[task])
+    braille = env.unwrapped
+    sequences = paper_sequences(braille.task.keys)[:4]
+    typist = KeyByKeyTypist(env, margin_mm=1.0)
+    lands = []
+    original = typist.policy_action
+
+    def act(*args, **kwargs):
+        action = original(*args, **kwargs)
+        if action[-1] > -1.0:  # a press: where it lands, and the key it is for
+            goal = braille.goal_keys[int(braille._core.goal[0])]
+            lands.append((braille._core.position_mm[0] + action[:2] * braille.task.max_move_mm, goal))
+        return action
+
+    typist.policy_action = act
+    typed = type_sequences(typist, env, sequences, seed=1)
+    script = type_sequences(PoseScript(env), env, sequences, seed=1)
+    assert typed.accuracy == 1.0 and len(lands) == sum(map(len, sequences))
+    bound = typing_bound(task, sequences, seed=1, dataset=env_datasets[task], margin_mm=1.0)
+    assert bound <= typed.total_steps <= script.total_steps
+    backend = braille._core.backend
+    for (x, y), goal in lands:  # every point within the margin (less the raster's rounding) presses it
+        offsets = np.linspace(-(1.0 - RASTER_MM / 2), 1.0 - RASTER_MM / 2, 4)
+        ax, ay = np.meshgrid(x + offsets + braille.task.frame_origin_mm[0],
+                             y + offsets + braille.task.frame_origin_mm[1], indexing="ij")  # fmt: skip
+        pressed = np.stack([backend.pressed_codes(ax, ay, depth) for depth in backend.grid_depths_mm])
+        assert (pressed == braille.layout.key(goal).index).any(axis=0).all()
+
+
+def test_the_key_by_key_typist_refuses_a_world_whose_press_regions_it_cannot_read(env_datasets):
+    env = gym.make(DISCRETE[0], dataset=env_datasets[DISCRETE[0]])
+    with pytest.raises(ValueError, match=r"continuous task's dataset backend, got arrows \(discrete\)"):
+        KeyByKeyTypist(env)
+    env = gym.make(CONTINUOUS[0], dataset=env_datasets[CONTINUOUS[0]])
+    with pytest.raises(ValueError, match=r"margin_mm must be a multiple of 0\.5 mm"):
+        KeyByKeyTypist(env, margin_mm=0.2)
+
+
+@pytest.mark.parametrize(
+    ("task", "margin", "message"),
+    [
+        (DISCRETE[0], 1.0, "margin_mm is for the continuous tasks' press regions"),
+        (CONTINUOUS[0], 0.3, r"margin_mm must be a multiple of 0.5 mm, at least 0, got 0.3"),
+        (CONTINUOUS[0], -1.0, "at least 0, got -1.0"),
+        (CONTINUOUS[0], 50.0, r"no press lands 50.0 mm inside the regions of \['UP'"),
+    ],
+)
+def test_a_margin_that_cannot_be_counted_is_refused(env_datasets, task, margin, message):
+    with pytest.raises(ValueError, match=message):
+        typing_bound(task, [("UP",)], dataset=env_datasets.get(task), margin_mm=margin)
 
 
 @pytest.mark.parametrize("task", CONTINUOUS)

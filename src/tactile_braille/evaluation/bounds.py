@@ -27,6 +27,14 @@ simulation), for the sequences and start poses of a typing evaluation
   truly be at, so the count is never above the true fewest: a lower bound,
   loose by at most the regions' one-cell margin (0.5 mm) per key.
 
+**A margin** (``margin_mm``, continuous tasks): the same count when every
+press must land at least that far inside its key's press region, that is
+where every point of the raster within ``margin_mm`` presses the same key at
+some depth (the region shrunk by that many cells, not grown). A policy that
+knows the pose to the millimetre cannot count on pressing at a region's very
+edge on a rig, nor can one that estimates its pose from touch: the bound with
+a margin is what such a policy can at best hope for.
+
 With a reset per key (``protocol="released"``) each key starts from a fresh
 random pose. On the continuous tasks those are drawn from the generator the
 sequence's seed starts, which nothing else draws from on the dataset
@@ -34,6 +42,10 @@ backend: the bound is for those starts, as above. On the discrete tasks the
 taps draw their stored images from the same generator, so the starts depend
 on the policy's own steps: the bound is then the *expected* fewest steps over
 uniformly random starts (exact), and a policy can come below it by luck.
+
+:class:`KeyByKeyTypist` types the continuous tasks with the pose and the same
+press regions, but one key at a time, as a policy must: it does not know the
+next key. Its steps lie between the bound and the centre-seeking script.
 
 The same script with the pose gives an upper yardstick
 (``benchmarks/typing_bounds.py`` prints both, and the touch-only optimum).
@@ -49,6 +61,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from gymnasium.utils import seeding
+from scipy import ndimage
 
 from tactile_braille.envs.backends import DatasetBackend
 from tactile_braille.envs.core import OBSERVATION_SIZE_PX, BatchedBraille
@@ -69,6 +82,7 @@ def typing_bound(
     seed: int = 0,
     dataset=None,
     grid: str = "rig",
+    margin_mm: float = 0.0,
 ) -> float:
     """The fewest steps any policy can type ``sequences`` in on ``task``'s dataset backend (module docs).
 
@@ -77,7 +91,9 @@ def typing_bound(
     ``reset(seed=seed + i)`` draws). ``protocol="paper"``: for those starts;
     ``"released"``: for the starts the resets draw (continuous tasks), or the
     expectation over uniformly random starts (discrete tasks). ``grid``: the discrete tasks' key grid
-    (``"rig"`` or the released simulator's, ``"released"``).
+    (``"rig"`` or the released simulator's, ``"released"``). ``margin_mm``: on the continuous tasks,
+    presses land at least this far inside their key's press region (a multiple of :data:`RASTER_MM`;
+    0: anywhere in it, its edges included).
     """
     task_id = task if "/" in task else f"tactile_braille/{task}"
     spec = task_of(task_id)
@@ -85,18 +101,32 @@ def typing_bound(
         raise ValueError(f"typing_bound is for the braille tasks, got {task!r}")
     spec = Task(spec.keys, spec.continuous, grid=grid)
     sequences = paper_sequences(spec.keys) if sequences is None else [tuple(s) for s in sequences]
+    if margin_mm and not spec.continuous:
+        raise ValueError(f"margin_mm is for the continuous tasks' press regions; {task} moves on a grid")
+    cells = margin_cells(margin_mm)
     where = None if dataset is None else str(getattr(dataset, "path", dataset))
-    key = (task_id, tuple(sequences), protocol, seed, where, grid)
+    key = (task_id, tuple(sequences), protocol, seed, where, grid, cells)
     if key not in _BOUNDS:
-        _BOUNDS[key] = _typing_bound(task_id, spec, sequences, protocol, seed, dataset)
+        _BOUNDS[key] = _typing_bound(task_id, spec, sequences, protocol, seed, dataset, cells)
     return _BOUNDS[key]
 
 
+def margin_cells(margin_mm: float) -> int:
+    """A press margin in raster cells; a ValueError unless it is a multiple of :data:`RASTER_MM`, >= 0."""
+    cells = margin_mm / RASTER_MM
+    if not (margin_mm >= 0 and math.isclose(cells, round(cells), abs_tol=1e-9)):
+        raise ValueError(f"margin_mm must be a multiple of {RASTER_MM} mm, at least 0, got {margin_mm}")
+    return round(cells)
+
+
 _BOUNDS: dict[tuple, float] = {}
-"""Bounds computed in this process, by task, sequences, protocol, seed, dataset path and key grid."""
+"""Bounds computed in this process, by task, sequences, protocol, seed, dataset path, key grid and margin
+(in raster cells)."""
 
 
-def _typing_bound(task_id: str, spec, sequences: list[tuple[str, ...]], protocol: str, seed: int, dataset):
+def _typing_bound(
+    task_id: str, spec, sequences: list[tuple[str, ...]], protocol: str, seed: int, dataset, margin: int
+):
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
     unknown = sorted({key for s in sequences for key in s} - set(spec.goal_keys))
@@ -107,7 +137,7 @@ def _typing_bound(task_id: str, spec, sequences: list[tuple[str, ...]], protocol
     layout = KeyboardLayout()
     core = BatchedBraille(spec, _Blind(layout), 1)
     if spec.continuous:
-        world = _ContinuousWorld(spec, DatasetBackend(spec, dataset, layout=layout), core)
+        world = _ContinuousWorld(spec, DatasetBackend(spec, dataset, layout=layout), core, margin)
     else:
         world = _GridWorld(spec, core)
     total = 0.0
@@ -170,7 +200,7 @@ class _GridWorld:
 class _ContinuousWorld:
     """Continuous tasks on the dataset backend: raster masks of where the sensor can be."""
 
-    def __init__(self, task: Task, backend: DatasetBackend, core: BatchedBraille) -> None:
+    def __init__(self, task: Task, backend: DatasetBackend, core: BatchedBraille, margin: int = 0) -> None:
         self.core = core
         (x0, x1), (y0, y1) = task.workspace_mm
         self.low = np.array([x0, y0])
@@ -198,7 +228,13 @@ class _ContinuousWorld:
         # rounding edges, but for its left and lower edges: a point on one of those may round to the
         # neighbouring sample. Growing each region by one cell takes such points in.
         self.pressing = regions  # the cells whose centre presses each key
-        self.regions = {key: _dilate(region, 1) for key, region in regions.items()}
+        if margin:  # the cells whose every neighbour within the margin presses the key
+            self.regions = {key: ~_dilate(~region, margin) for key, region in regions.items()}
+        else:
+            self.regions = {key: _dilate(region, 1) for key, region in regions.items()}
+        emptied = [key for key, region in self.regions.items() if not region.any()]
+        if emptied:
+            raise ValueError(f"no press lands {margin * RASTER_MM} mm inside the regions of {emptied}")
 
     def _reach(self, mask: np.ndarray, moves: int) -> np.ndarray:
         """The cells holding every point within ``moves`` steps of a point of ``mask``'s cells (a cell
@@ -230,6 +266,65 @@ class _ContinuousWorld:
             if not any(not (mask & ~self._reach(k_mask, steps - k_steps)).any() for k_steps, k_mask in kept):
                 kept.append((steps, mask))
         return kept
+
+
+class KeyByKeyTypist:
+    """A pose-aware typist for the continuous tasks that types one key at a time, as a policy must.
+
+    It knows the sensor's pose and the press regions :func:`typing_bound` counts on (so it is a
+    yardstick, not a baseline), but not the next key. It presses ``margin_mm`` inside the goal's
+    region, where that key's steps plus the mean fewest steps from there to each of the other keys (the
+    next key asked: the paper's sequences never repeat one) are fewest; on the way it moves as far as a
+    step goes towards that place with a light tap, and plans again after every step. It acts through
+    the agents' interface (``policy_action``), so the typing evaluation counts its steps.
+
+    Args:
+        env: a continuous braille environment on the dataset backend (wrapped or not).
+        margin_mm: how far inside its key's press region each press lands (a multiple of
+            :data:`RASTER_MM`).
+    """
+
+    def __init__(self, env, margin_mm: float = 1.0) -> None:
+        braille = env.unwrapped
+        backend = braille._core.backend
+        if not braille.task.continuous or not isinstance(backend, DatasetBackend):
+            raise ValueError(
+                f"the key-by-key typist reads the press regions of a continuous task's dataset backend, "
+                f"got {braille.task.keys} ({'continuous' if braille.task.continuous else 'discrete'}) on "
+                f"{type(backend).__name__}"
+            )
+        self.env, self.braille = env, braille
+        margin = margin_cells(margin_mm)
+        self.world = _ContinuousWorld(braille.task, backend, braille._core, margin)
+        regions = self.world.regions if margin else self.world.pressing  # cells whose centre presses
+        move = self.world.move_cells
+        reach = {}  # the fewest steps from each raster cell to a press of each key
+        for key, region in regions.items():
+            distance = ndimage.distance_transform_cdt(~region, metric="chessboard")
+            reach[key] = np.maximum(1, np.ceil(distance / move))
+        self.places = {key: np.argwhere(region) for key, region in regions.items()}
+        self.after = {  # at each place of a key's region: the mean fewest steps to the next key
+            key: np.mean([reach[other] for other in reach if other != key], axis=0)[tuple(places.T)]
+            for key, places in self.places.items()
+        }
+
+    def policy_action(self, observation, step, explore, rng, deterministic=False) -> np.ndarray:
+        braille, world = self.braille, self.world
+        core, task = braille._core, braille.task
+        goal = braille.goal_keys[int(core.goal[0])]
+        centres = world.low + (self.places[goal] + 0.5) * RASTER_MM
+        offsets = centres - core.position_mm[0]
+        steps = np.maximum(1, np.ceil(np.abs(offsets).max(axis=1) / task.max_move_mm - 1e-9))
+        best = int(np.argmin(steps + self.after[goal]))
+        move = offsets[best] / task.max_move_mm
+        if steps[best] > 1:  # not within reach: as far as a step goes, tapping lightly
+            return np.array([*np.clip(move, -1, 1), -1.0], dtype=np.float32)
+        x, y = centres[best] + task.frame_origin_mm
+        depths = core.backend.grid_depths_mm
+        code = braille.layout.key(goal).index
+        depth = depths[np.flatnonzero(core.backend.pressed_codes(x, y, depths) == code)[-1]]  # the deepest
+        low, high = task.depth_range_mm
+        return np.array([*move, (depth - (low + high) / 2) / ((high - low) / 2)], dtype=np.float32)
 
 
 def _dilate(mask: np.ndarray, cells: int) -> np.ndarray:
