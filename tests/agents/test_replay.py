@@ -43,7 +43,6 @@ from tactile_braille.agents.replay import (
     FeatureCache,
     FrameStore,
     GoalOutcomes,
-    NextGoals,
     PaperRelabelling,
     PressFrames,
     Relabelling,
@@ -1327,20 +1326,3 @@ def test_n_step_windows_survive_the_ring_wrapping():
 def test_n_step_settings_are_checked(n_step, gamma, message):
     with pytest.raises(ValueError, match=message):
         EpisodeReplayBuffer(10, GOALS, (), replay_helpers.PREVIOUS, n_step=n_step, gamma=gamma)
-
-
-def test_next_goals_are_one_hots_of_every_key_but_the_batch_goal():
-    """The key asked next is drawn uniformly among the others: a typing sequence never repeats a key."""
-    buffer = all_buffer(extras=(NextGoals(),))
-    fill(buffer, Frames())
-    batch = buffer.sample(4000, np.random.default_rng(0))
-    goals, following = goal_indices(batch["goals"]), goal_indices(batch["next_goals"])
-    assert batch["next_goals"].shape == batch["goals"].shape and set(np.unique(batch["next_goals"])) == {0, 1}
-    assert (batch["next_goals"].sum(-1) == 1).all() and not (following == goals).any()
-    for goal in range(GOALS):
-        counts = np.bincount(following[goals == goal], minlength=GOALS)
-        others = np.delete(counts, goal)
-        assert abs(others / others.sum() - 1 / (GOALS - 1)).max() < 0.05
-    plain = all_buffer()
-    fill(plain, Frames())
-    assert "next_goals" not in plain.sample(4, np.random.default_rng(0))  # asked for only

@@ -274,10 +274,6 @@ class SACConfig(AgentConfig):
         all_goals: every update teaches every goal, as DQN's: the critics' targets, the actor's
             loss and the temperature's entropy are computed under each goal (the goal one-hot an
             input, the encoder run once) for each sampled transition. ``False``: the sampled goal only.
-        next_key: after a press of the goal key, the critics' target adds this share of the
-            discounted value of typing a next key (drawn among the others) from where the press left
-            the sensor, as the paper's typing evaluation chains keys; the critics then prefer presses
-            from which any next key is near. 0: a press ends the value (the paper's episodes).
     """
 
     gamma: float = 0.95
@@ -295,23 +291,10 @@ class SACConfig(AgentConfig):
     log_std: LogStdRule = "clamp"
     action_input_scale: float = 1.0
     all_goals: bool = False
-    next_key: float = 0.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not 0.0 <= self.next_key <= 1.0:
-            raise ValueError(f"SACConfig: next_key is a share of a value: in [0, 1], got {self.next_key}")
 
     def check_run(self, run: TrainConfig) -> None:
         check_goal_inputs(run, self.all_goals)
         check_critic_pose(run, self.critic_pose)
-        learnt_goals = run.touch.enabled and run.touch.goal_positions and run.touch.labels == "observation"
-        if self.next_key > 0 and (self.all_goals or run.replay.n_step > 1 or learnt_goals):
-            raise ValueError(
-                "agent.next_key values a next key after one-step targets of the sampled goal, placed "
-                "on the calibrated layout or not at all: set agent.all_goals off, replay.n_step=1, and "
-                "touch.goal_positions off or touch.labels='robot'"
-            )
 
     def proprio_settings(self) -> dict[str, str]:
         return {"agent.critic_pose": CRITIC_POSE_USES} if self.critic_pose else {}

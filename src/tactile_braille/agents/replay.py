@@ -461,20 +461,6 @@ class SensorPoses(BatchExtra):
         return {"poses": poses[:, 0], "next_poses": poses[:, 1]}
 
 
-class NextGoals(BatchExtra):
-    """``next_goals``: for each transition, a goal one-hot drawn uniformly among the keys other than its
-    batch goal, the key a typist asks next (the paper's typing sequences never repeat a key), for an
-    agent that values where a press leaves the sensor."""
-
-    def add(self, buffer, sampled, rng):
-        goals = sampled.goals.argmax(-1)
-        keys = sampled.goals.shape[1]
-        if keys < 2:
-            raise ValueError(f"a next key needs a task of two keys or more, got goals of {keys}")
-        others = (goals + rng.integers(1, keys, size=len(goals))) % keys  # any key but the goal
-        return {"next_goals": np.eye(keys, dtype=np.float32)[others]}
-
-
 class EpisodeSteps(BatchExtra):
     """Adds nothing to batches; its checkpoints keep each transition's ``remaining`` steps, for an agent
     that reads the replay's episodes itself (the key-graph planner) and needs them after a resume."""

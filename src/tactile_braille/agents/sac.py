@@ -35,7 +35,7 @@ from tactile_braille.agents.networks import (
     observation_tensors,
     soft_update,
 )
-from tactile_braille.agents.replay import GoalOutcomes, NextGoals, SensorPoses
+from tactile_braille.agents.replay import GoalOutcomes, SensorPoses
 from tactile_braille.supervised.fit import adam
 
 
@@ -57,12 +57,10 @@ class SACAgent(Agent):
 
     @classmethod
     def replay_extras(cls, config: SACConfig) -> tuple:
-        """Every goal's outcome (``all_goals``), the sensor poses its critics see (``critic_pose``) and
-        the keys asked next (``next_key``)."""
+        """Every goal's outcome (``all_goals``) and the sensor poses its critics see (``critic_pose``)."""
         return (
             *([GoalOutcomes()] if config.all_goals else []),
             *([SensorPoses()] if config.critic_pose else []),
-            *([NextGoals()] if config.next_key > 0 else []),
         )
 
     def __init__(
@@ -133,8 +131,6 @@ class SACAgent(Agent):
                 next_actions, next_log_probs, _ = actor(*next_state)
                 next_q = torch.min(*(target(*next_state, next_actions, *next_poses) for target in targets))
                 target = rewards + continues * (next_q - alpha * next_log_probs)
-                if self.config.next_key > 0:
-                    target = target + self._next_key_value(t, alpha, next_poses) * rewards * t["dones"]
             critic_loss = sum(F.mse_loss(critic(*state, t["actions"], *poses), target) for critic in critics)
         self.critic_optimiser.zero_grad(set_to_none=True)
         critic_loss.backward()
@@ -162,16 +158,6 @@ class SACAgent(Agent):
             "losses/alpha": alpha.item(),
             "losses/entropy": -log_probs.mean().item(),
         }
-
-    def _next_key_value(
-        self, t: dict[str, torch.Tensor], alpha: torch.Tensor, next_poses: tuple
-    ) -> torch.Tensor:
-        """``next_key`` times the discounted soft value of typing the batch's ``next_goals`` from each
-        transition's next frame (where a press of the goal leaves the sensor)."""
-        state = (t["next_images"], t["next_goals"], t["next_previous_actions"])
-        actions, log_probs, _ = self.actor(*state)
-        value = torch.min(*(target(*state, actions, *next_poses) for target in self.targets))
-        return self.config.next_key * self.discount(t) * (value - alpha * log_probs)
 
 
 def _unit_box_size(action_space: gym.Space, algorithm: str) -> int:

@@ -162,8 +162,6 @@ class TouchAgent:
         """An update of the wrapped agent; poses in the batch are standardised as the encoder's targets."""
         views = {name: self.view(batch[name], batch["goals"]) for name in ("images", "next_images")}
         batch = {**batch, **views, "goals": self.goals(batch["goals"])}
-        if "next_goals" in batch:
-            batch["next_goals"] = self.goals(batch["next_goals"])
         if "poses" in batch:
             batch["poses"] = self.touch.standardise(batch["poses"])
             batch["next_poses"] = self.touch.standardise(batch["next_poses"])
