@@ -12,7 +12,13 @@ import pytest
 
 from tactile_braille.envs.oracle import PoseScript
 from tactile_braille.evaluation import bounds
-from tactile_braille.evaluation.bounds import RASTER_MM, KeyByKeyTypist, _ContinuousWorld, typing_bound
+from tactile_braille.evaluation.bounds import (
+    RASTER_MM,
+    KeyByKeyTypist,
+    _ContinuousWorld,
+    margin_cells,
+    typing_bound,
+)
 from tactile_braille.evaluation.protocol import paper_sequences, type_sequences
 from tactile_braille.evaluation.scoring import evaluate_policy
 
@@ -112,6 +118,33 @@ def test_the_continuous_bound_is_tight_a_policy_that_presses_at_the_region_edge_
     assert min(gaps) >= 0 and max(gaps) <= 1 and np.mean(gaps) < 0.2, gaps
 
 
+def recording_presses(policy, braille) -> list[tuple[np.ndarray, str]]:
+    """Wrap ``policy.policy_action`` so that each press's landing (work frame) and goal key are recorded
+    in the list returned."""
+    presses, original = [], policy.policy_action
+
+    def act(*args, **kwargs):
+        action = original(*args, **kwargs)
+        if action[-1] > -1.0:  # a press (moves tap at -1): where it lands, and the key it is for
+            goal = braille.goal_keys[int(braille._core.goal[0])]
+            presses.append((braille._core.position_mm[0] + action[:2] * braille.task.max_move_mm, goal))
+        return action
+
+    policy.policy_action = act
+    return presses
+
+
+def presses_all_around(braille, landing: np.ndarray, key: str, margin_mm: float) -> bool:
+    """Whether every point within ``margin_mm`` of ``landing`` (less the raster's rounding) presses ``key``
+    at some stored depth, as the press regions are defined."""
+    x, y = landing + braille.task.frame_origin_mm
+    offsets = np.linspace(-(margin_mm - RASTER_MM / 2), margin_mm - RASTER_MM / 2, 4)
+    ax, ay = np.meshgrid(x + offsets, y + offsets, indexing="ij")
+    backend = braille._core.backend
+    pressed = np.stack([backend.pressed_codes(ax, ay, depth) for depth in backend.grid_depths_mm])
+    return bool((pressed == braille.layout.key(key).index).any(axis=0).all())
+
+
 @pytest.mark.parametrize("task", CONTINUOUS)
 def test_a_margin_keeps_every_press_that_far_inside_and_the_bound_is_tight_for_such_presses(
     env_datasets, task
@@ -122,18 +155,10 @@ def test_a_margin_keeps_every_press_that_far_inside_and_the_bound_is_tight_for_s
     env = gym.make(task, dataset=env_datasets[task])
     braille = env.unwrapped
     margin = 1.0
-    world = _ContinuousWorld(braille.task, braille._core.backend, braille._core, round(margin / RASTER_MM))
+    world = _ContinuousWorld(braille.task, braille._core.backend, braille._core, margin_cells(margin))
     policy = EdgePresser(env, world, margin=True)
-    keys, gaps, presses = braille.goal_keys, [], []
-    original = policy.policy_action
-
-    def act(*args, **kwargs):
-        action = original(*args, **kwargs)
-        if action[-1] > -1.0:  # a press: where it lands
-            presses.append(braille._core.position_mm[0] + action[:2] * braille.task.max_move_mm)
-        return action
-
-    policy.policy_action = act
+    keys, gaps = braille.goal_keys, []
+    presses = recording_presses(policy, braille)
     for seed in range(12):
         sequence = (keys[seed % len(keys)],)
         typed = type_sequences(policy, env, [sequence], seed=seed)
@@ -141,14 +166,8 @@ def test_a_margin_keeps_every_press_that_far_inside_and_the_bound_is_tight_for_s
         bound = typing_bound(task, [sequence], seed=seed, dataset=env_datasets[task], margin_mm=margin)
         assert bound >= typing_bound(task, [sequence], seed=seed, dataset=env_datasets[task])
         gaps.append(typed.total_steps - bound)
-        # Every point around the press, out to the margin (less the raster's rounding), presses the goal
-        # at some depth, as the regions are defined.
-        x, y = presses[-1] + braille.task.frame_origin_mm
-        offsets = np.linspace(-(margin - RASTER_MM / 2), margin - RASTER_MM / 2, 4)
-        ax, ay = np.meshgrid(x + offsets, y + offsets, indexing="ij")
-        backend = braille._core.backend
-        pressed = np.stack([backend.pressed_codes(ax, ay, depth) for depth in backend.grid_depths_mm])
-        assert (pressed == braille.layout.key(sequence[0]).index).any(axis=0).all()
+        landing, goal = presses[-1]
+        assert goal == sequence[0] and presses_all_around(braille, landing, goal, margin)
     assert min(gaps) >= 0 and max(gaps) <= 1, gaps
     sequences = paper_sequences(braille.task.keys)[:3]
     margins = [
@@ -167,29 +186,13 @@ def test_the_key_by_key_typist_types_every_key_between_the_bound_and_the_centre_
     braille = env.unwrapped
     sequences = paper_sequences(braille.task.keys)[:4]
     typist = KeyByKeyTypist(env, margin_mm=1.0)
-    lands = []
-    original = typist.policy_action
-
-    def act(*args, **kwargs):
-        action = original(*args, **kwargs)
-        if action[-1] > -1.0:  # a press: where it lands, and the key it is for
-            goal = braille.goal_keys[int(braille._core.goal[0])]
-            lands.append((braille._core.position_mm[0] + action[:2] * braille.task.max_move_mm, goal))
-        return action
-
-    typist.policy_action = act
+    lands = recording_presses(typist, braille)
     typed = type_sequences(typist, env, sequences, seed=1)
     script = type_sequences(PoseScript(env), env, sequences, seed=1)
     assert typed.accuracy == 1.0 and len(lands) == sum(map(len, sequences))
     bound = typing_bound(task, sequences, seed=1, dataset=env_datasets[task], margin_mm=1.0)
     assert bound <= typed.total_steps <= script.total_steps
-    backend = braille._core.backend
-    for (x, y), goal in lands:  # every point within the margin (less the raster's rounding) presses it
-        offsets = np.linspace(-(1.0 - RASTER_MM / 2), 1.0 - RASTER_MM / 2, 4)
-        ax, ay = np.meshgrid(x + offsets + braille.task.frame_origin_mm[0],
-                             y + offsets + braille.task.frame_origin_mm[1], indexing="ij")  # fmt: skip
-        pressed = np.stack([backend.pressed_codes(ax, ay, depth) for depth in backend.grid_depths_mm])
-        assert (pressed == braille.layout.key(goal).index).any(axis=0).all()
+    assert all(presses_all_around(braille, landing, goal, 1.0) for landing, goal in lands)
 
 
 def test_the_key_by_key_typist_refuses_a_world_whose_press_regions_it_cannot_read(env_datasets):
