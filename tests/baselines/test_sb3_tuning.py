@@ -28,6 +28,10 @@ def test_a_search_resumes_and_its_final_runs_record_it(env_datasets, tmp_path):
         sb3.tune("DiscreteArrows-v0", "dqn", 3, study, steps=90, dataset=dataset)
     (path,) = sb3.run_seeds("DiscreteArrows-v0", "dqn", study, [7], tmp_path / "out", dataset)
     tuning = read_result(path)["tuning"]
+    record = tmp_path / "record"  # the search's record alone, as it travels to another machine
+    record.mkdir()
+    (record / "DiscreteArrows-v0__dqn.json").write_text((study / "DiscreteArrows-v0__dqn.json").read_text())
+    assert sb3.search_record(record, "DiscreteArrows-v0", "dqn") == json.loads(json.dumps(again))
     assert read_result(path)["seed"] == 7 and read_result(path)["budget"]["env_steps"] == 60
     assert (tuning["trials"], tuning["seed"], tuning["steps"]) == (2, 100, 60)
     assert tuning["best"] == json.loads(json.dumps(again["best"]))
@@ -40,8 +44,14 @@ def test_the_protocol_refuses_to_tune_on_reported_seeds_or_report_tuning_seeds(t
         sb3.tune("DiscreteArrows-v0", "dqn", 1, tmp_path, seed=0)
     with pytest.raises(ValueError, match=r"seeds \[100\] are tuning seeds"):
         sb3.run_seeds("DiscreteArrows-v0", "dqn", tmp_path, [0, 100], tmp_path / "out")
-    with pytest.raises(FileNotFoundError, match="no study at"):
+    with pytest.raises(FileNotFoundError, match=r"no study at .* and no record of one at"):
         sb3.run_seeds("DiscreteArrows-v0", "dqn", tmp_path, [0], tmp_path / "out")
+    (tmp_path / "DiscreteArrows-v0__dqn.json").write_text(
+        json.dumps({"task": "DiscreteArrows-v0", "algo": "qrdqn"})
+    )
+    with pytest.raises(ValueError, match="is no record of a search of dqn on DiscreteArrows-v0"):
+        sb3.run_seeds("DiscreteArrows-v0", "dqn", tmp_path, [0], tmp_path / "out")
+    assert not (tmp_path / "out").exists()
     assert [sb3.official_budget(task) for task in ("DiscreteArrows-v0", ARROWS)] == [6_250, 6_250]
 
 

@@ -337,28 +337,48 @@ def _plain(value):
 
 
 # ------------------------------------------------------------------ final runs
+def search_record(study_dir: Path, task: str, algo: str) -> dict:
+    """The finished search of ``algo`` on ``task`` (:func:`summary`): from its study in ``study_dir``,
+    whose trials must all have finished, or else from the record written beside it (``TASK__ALGO.json``),
+    which may travel without the study."""
+    import optuna
+
+    path = Path(study_dir) / f"{task}__{algo}.db"
+    record = path.with_suffix(".json")
+    if path.exists():
+        study = _study(path, task, algo, create=False)
+        optuna.storages.fail_stale_trials(study)  # trials whose process stopped sending its heartbeat
+        going = [t.number for t in study.trials if t.state.name in ("RUNNING", "WAITING")]
+        if going:
+            raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
+        tuning = summary(study, task, algo)
+    elif record.exists():
+        tuning = json.loads(record.read_text())
+        found = (tuning.get("task"), tuning.get("algo"))
+        if found != (task, algo) or not {"best", "steps", "trials"} <= tuning.keys():
+            raise ValueError(f"{record} is no record of a search of {algo} on {task} (it names {found})")
+    else:
+        raise FileNotFoundError(f"no study at {path} and no record of one at {record}: run `tune` first")
+    if tuning["best"] is None:
+        raise ValueError(f"{path} holds no finished trial yet")
+    return tuning
+
+
 def run_seeds(
     task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None, device: str = "cpu"
 ) -> list[Path]:
     """The best trial's settings trained on each of ``seeds`` (none a tuning seed) at the budget the
     search used, on ``device``; one results file each in ``into``. A file that exists is kept and a seed
-    another process is training is left to it, so calls can go on side by side and after a stop."""
-    import optuna
-
+    another process is training is left to it, so calls can go on side by side and after a stop. The
+    search is read from its study in ``study_dir`` or, where there is none (on another machine), from
+    the record ``tune`` writes beside it."""
     from tactile_braille._io import LockedError, exclusive_lock
 
     clash = sorted(set(seeds) & set(TUNING_SEEDS))
     if clash:
         raise ValueError(f"seeds {clash} are tuning seeds: report on others")
     path = Path(study_dir) / f"{task}__{algo}.db"
-    study = _study(path, task, algo, create=False)
-    optuna.storages.fail_stale_trials(study)  # trials whose process stopped sending its heartbeat
-    going = [t.number for t in study.trials if t.state.name in ("RUNNING", "WAITING")]
-    if going:
-        raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
-    tuning = summary(study, task, algo)
-    if tuning["best"] is None:
-        raise ValueError(f"{path} holds no finished trial yet")
+    tuning = search_record(study_dir, task, algo)
     Path(into).mkdir(parents=True, exist_ok=True)
     written = []
     for seed in seeds:
@@ -391,8 +411,9 @@ def main(argv=None) -> int:
         command.add_argument("task", help="e.g. DiscreteArrows-v0")
         command.add_argument("algo", choices=sorted(ALGORITHMS))
         command.add_argument(
-            "--study", type=Path, required=True, help="folder of the search's study (SQLite)"
-        )
+            "--study", type=Path, required=True,
+            help="folder of the search's study (SQLite) and its record (JSON; `run` reads either)",
+        )  # fmt: skip
         command.add_argument("--dataset", type=Path, help="the dataset backend's file (default: cached)")
         command.add_argument("--device", default="cpu", help="where the networks train: cpu (default), cuda")
     commands.choices["tune"].add_argument("--trials", type=int, required=True, help="trials to finish in all")
