@@ -40,8 +40,8 @@ run ContinuousAlphabet-v0 td3 4000 0
 # Tuned by the benchmark's protocol (docs/benchmark.md, "The tuning protocol"): an Optuna search on tuning
 # seed 100 at the task's official budget (its journal under runs/tune: a stopped search goes on; two
 # processes may share it), then the best settings on fresh seeds 0-4. A finished search's record is
-# committed in results/searches/: on a machine without runs/tune, `run ... --study results/searches`. A trial of the continuous tasks'
-# 25,000 steps takes over an hour on one CPU core (SB3's SAC): on a GPU node,
+# committed in results/searches/: on a machine without runs/tune, `run ... --study results/searches`.
+# A trial of the continuous tasks' 25,000 steps takes over an hour on one CPU core (SB3's SAC): on a GPU node,
 # `tools/offline_gpu_sweep.sh tune SEARCH_S FINAL_S TASK ALGO TRIALS` runs a search and its final seeds
 # in one job (docs/evaluation.md).
 tuned() {  # TASK ALGO TRIALS

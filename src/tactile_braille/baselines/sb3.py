@@ -351,16 +351,16 @@ def search_record(study_dir: Path, task: str, algo: str) -> dict:
         going = [t.number for t in study.trials if t.state.name in ("RUNNING", "WAITING")]
         if going:
             raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
-        tuning = summary(study, task, algo)
+        tuning, source = summary(study, task, algo), path
     elif record.exists():
-        tuning = json.loads(record.read_text())
+        tuning, source = json.loads(record.read_text()), record
         found = (tuning.get("task"), tuning.get("algo"))
         if found != (task, algo) or not {"best", "steps", "trials"} <= tuning.keys():
             raise ValueError(f"{record} is no record of a search of {algo} on {task} (it names {found})")
     else:
         raise FileNotFoundError(f"no study at {path} and no record of one at {record}: run `tune` first")
     if tuning["best"] is None:
-        raise ValueError(f"{path} holds no finished trial yet")
+        raise ValueError(f"{source} holds no finished trial yet")
     return tuning
 
 
@@ -377,14 +377,13 @@ def run_seeds(
     clash = sorted(set(seeds) & set(TUNING_SEEDS))
     if clash:
         raise ValueError(f"seeds {clash} are tuning seeds: report on others")
-    path = Path(study_dir) / f"{task}__{algo}.db"
     tuning = search_record(study_dir, task, algo)
     Path(into).mkdir(parents=True, exist_ok=True)
     written = []
     for seed in seeds:
         target = Path(into) / f"{task}__{algo}__{seed}.json"
         try:
-            with exclusive_lock(path.parent / f".{target.name}.lock", f"the run of {target}"):
+            with exclusive_lock(Path(study_dir) / f".{target.name}.lock", f"the run of {target}"):
                 if not target.exists():
                     model, seconds = train(task, algo, tuning["best"]["params"], tuning["steps"], seed,
                                            dataset, device=device)  # fmt: skip
