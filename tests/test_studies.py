@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from tactile_braille.agents import DiscreteSACConfig, DQNConfig, SACConfig, TrainConfig, train
+from tactile_braille.agents import DiscreteSACConfig, DQNConfig, MRQConfig, SACConfig, TrainConfig, train
 from tactile_braille.agents.config import replace_settings
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,6 +46,23 @@ def test_policy_critic_agreement_measures_where_the_policy_leaves_its_critics(en
     assert np.all(presses[agree == 1] == best_presses[agree == 1])  # the same action where they agree
     dqn = _tiny_run(env_datasets, tmp_path / "dqn", "dqn", DQNConfig(hidden=(16,), batch_size=8))
     with pytest.raises(ValueError, match="a dqn run; this compares a discrete SAC"):
+        script.load_agent(dqn)
+
+
+def test_mrq_values_reads_the_value_under_every_goal_and_the_policy_beside_it(env_datasets, tmp_path):
+    script = _load("mrq_values")
+    tiny = MRQConfig(batch_size=8, target_every=4, hidden_units=16, state_size=16, state_action_size=16,
+                     action_size=8)  # fmt: skip
+    env, agent = script.load_agent(_tiny_run(env_datasets, tmp_path / "mrq", "mrq", tiny))
+    rows = script.start_measures(env, agent, starts=3, seed=0)
+    assert len(rows) == 3
+    for row in rows:
+        assert row["values"].shape == (4, 5) and np.isfinite(row["values"]).all()  # 4 arrows, 5 actions
+        assert row["one_hot"] == row["values"][row["goal"]].max()
+        assert row["best"] == row["values"][row["goal"]].argmax() and 0 <= row["greedy"] < 5
+        assert np.ptp(row["values"], axis=0).max() > 0  # a goal one-hot changes an untrained value
+    dqn = _tiny_run(env_datasets, tmp_path / "dqn", "dqn", DQNConfig(hidden=(16,), batch_size=8))
+    with pytest.raises(ValueError, match=r"not a discrete MR\.Q run"):
         script.load_agent(dqn)
 
 
