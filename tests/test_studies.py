@@ -53,12 +53,19 @@ def test_mrq_values_reads_the_value_under_every_goal_and_the_policy_beside_it(en
     script = _load("mrq_values")
     tiny = MRQConfig(batch_size=8, target_every=4, hidden_units=16, state_size=16, state_action_size=16,
                      action_size=8)  # fmt: skip
-    env, agent = script.load_agent(_tiny_run(env_datasets, tmp_path / "mrq", "mrq", tiny))
+    run = _tiny_run(env_datasets, tmp_path / "mrq", "mrq", tiny)
+    env, agent = script.load_agent(run)
+    replay = script.replay_measures(env, agent, script.load_replay(run, env), batch_size=64, seed=0)
+    assert all(0 < spread < 2 for pair in replay["spread"].values() for spread in pair)
+    assert replay["spread"]["trained"] != replay["spread"]["fresh"]  # an update changed the encoder
+    assert set(replay["presses"]) == {"right", "wrong"}
+    wrong = replay["presses"]["wrong"]
+    assert wrong["count"] > 0 and np.isfinite([wrong["model_reward"], wrong["value"]]).all()
+    assert wrong["target"] == 0  # a wrong press ends its episode with nothing to bootstrap
     rows = script.start_measures(env, agent, starts=3, seed=0)
     assert len(rows) == 3
     for row in rows:
         assert row["values"].shape == (4, 5) and np.isfinite(row["values"]).all()  # 4 arrows, 5 actions
-        assert row["one_hot"] == row["values"][row["goal"]].max()
         assert row["best"] == row["values"][row["goal"]].argmax() and 0 <= row["greedy"] < 5
         assert np.ptp(row["values"], axis=0).max() > 0  # a goal one-hot changes an untrained value
     dqn = _tiny_run(env_datasets, tmp_path / "dqn", "dqn", DQNConfig(hidden=(16,), batch_size=8))

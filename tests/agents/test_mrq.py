@@ -12,6 +12,7 @@ import torch
 
 from agents_helpers import through_file
 from replay_helpers import (
+    FEATURES,
     GOALS,
     PREVIOUS,
     Frames,
@@ -169,6 +170,28 @@ def test_the_two_hot_encoding_puts_each_reward_between_its_two_bins():
     sharp = torch.full((1, 65), -1e4)
     sharp[0, 32] = 1e4  # the bin of 0
     assert two_hot.cross_entropy(sharp, torch.tensor([0.0])).item() == pytest.approx(0.0, abs=1e-4)
+
+
+def test_the_discrete_policy_learns_the_values_best_action_under_the_batch_goal():
+    box = lambda size: gym.spaces.Box(-np.inf, np.inf, (size,), np.float32)  # noqa: E731
+    observation_space = gym.spaces.Dict({
+        "observation": box(FEATURES), "desired_goal": box(GOALS), "achieved_goal": box(GOALS),
+        "previous_action": box(PREVIOUS),
+    })  # fmt: skip
+    torch.manual_seed(0)
+    agent = MRQAgent(observation_space, gym.spaces.Discrete(PREVIOUS),
+                     MRQConfig(**TINY, image_shift=0, policy_learning_rate=3e-3))  # fmt: skip
+    for optimiser in (agent.encoder_optimiser, agent.value_optimiser):  # the value stays as it is
+        optimiser.param_groups[0]["lr"] = 0.0
+    buffer, rng = three_episodes(horizon=5), np.random.default_rng(0)
+    for _ in range(200):
+        agent.update(agent.sample(buffer, 8, rng))
+    t = agent.tensors(agent._draw(buffer, 256, rng))
+    with torch.no_grad():
+        zs = agent.encoder.zs(t["images"], t["goals"], t["previous_actions"])
+        greedy, best = agent.policy(zs, t["goals"]).argmax(-1), agent._best_actions(zs, t["goals"])
+    assert len(best.unique()) > 1  # the value ranks the actions differently across states and goals
+    assert (greedy == best).float().mean() > 0.95
 
 
 # ---------------------------------------------------------------- the agent in the loop

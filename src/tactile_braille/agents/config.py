@@ -415,9 +415,10 @@ class MRQConfig(AgentConfig):
         value_horizon: steps of the multi-step return of the value's target.
         encoder_horizon: steps the encoder's model is unrolled over.
         exploration_noise: deviation of the Gaussian noise on the policy's output while exploring
-            (halved for discrete actions, whose one-hot outputs span [0, 1]).
-        target_noise: deviation of the target policy's smoothing noise (halved for discrete actions).
-        noise_clip: bound of the smoothing noise (halved for discrete actions).
+            (continuous actions; a discrete policy explores by sampling its softmax).
+        target_noise: deviation of the target policy's smoothing noise (continuous actions; the
+            discrete target is the target policy's greedy action).
+        noise_clip: bound of the smoothing noise.
         dynamics_weight: weight of the encoder's next-embedding loss.
         reward_weight: weight of its reward loss (cross-entropy over two-hot bins).
         done_weight: weight of its episode-end loss.
@@ -432,7 +433,6 @@ class MRQConfig(AgentConfig):
         policy_learning_rate: AdamW's step size for the policy.
         weight_decay: AdamW's weight decay, for all three.
         value_grad_clip: the value's gradient norm is clipped to this.
-        gumbel_tau: temperature of the discrete policy's Gumbel-softmax.
         pre_activation_weight: penalty on the policy's squared pre-activations.
         reward_bins: bins of the reward model's two-hot encoding.
         reward_bound: the bins span symexp of [-reward_bound, reward_bound].
@@ -462,7 +462,6 @@ class MRQConfig(AgentConfig):
     policy_learning_rate: float = 3e-4
     weight_decay: float = 1e-4
     value_grad_clip: float = 20.0
-    gumbel_tau: float = 10.0
     pre_activation_weight: float = 1e-5
     reward_bins: int = 65
     reward_bound: float = 10.0
@@ -477,7 +476,7 @@ class MRQConfig(AgentConfig):
         problems = [
             f"{name} must be positive, got {getattr(self, name)}"
             for name in ("encoder_learning_rate", "value_learning_rate", "policy_learning_rate",
-                         "min_priority", "value_grad_clip", "gumbel_tau", "reward_bound")
+                         "min_priority", "value_grad_clip", "reward_bound")
             if not getattr(self, name) > 0
         ] + [
             f"{name} must not be negative, got {getattr(self, name)}"
@@ -1069,6 +1068,7 @@ _RETIRED_AGENT = {
         "press_accept": None,
         "backtrack_evidence": 0.0,
     },
+    "mrq": {"gumbel_tau": 10.0},
 }
 """Each algorithm's removed settings, with the one value the code still runs: a record that gives a
 removed setting that value reads as one without it; any other value is refused."""

@@ -2,22 +2,31 @@
 goal-conditioned braille tasks, discrete and continuous.
 
 Reads top to bottom: the networks (an encoder of state and state-action embeddings trained by a
-model-based loss, a twin value on the state-action embedding, a deterministic policy on the state
-embedding: tanh for continuous actions, Gumbel-softmax for discrete ones), the reward model's
-two-hot encoding, the agent's prioritised sampling (LAP), and its updates.
+model-based loss, a twin value on the state-action embedding and the goal, a deterministic policy on
+the state embedding and the goal: tanh for continuous actions, logits over discrete ones), the
+reward model's two-hot encoding, the agent's prioritised sampling (LAP), and its updates.
 
 As in the paper: every ``target_every`` updates the targets are copied, and the encoder then learns
 for ``target_every`` updates on sub-trajectories (the model unrolled over ``encoder_horizon`` steps:
 next state embedding, reward and episode end, masked after the episode's end), so that the value
 and the policy see a fixed encoder between copies; the value learns a ``value_horizon``-step
 return, scaled by the mean absolute reward of the replay, with clipped double Q and target-policy
-smoothing; the replay samples by the value's TD errors (LAP). For the tasks here the state is the
-tactile image with the goal and the previous action: the goal one-hot and the previous action join
-the image's convolutional features before the state embedding (the paper's state is the image
-alone). A sub-trajectory that a truncated episode cuts short is masked past its end (the paper does
-not sample it). Priorities are the TD errors of the value's update; the released code takes them
-after its policy step, from the policy's actions. In test episodes and typing the discrete policy
-acts greedily (the released code samples its Gumbel-softmax).
+smoothing; the replay samples by the value's TD errors (LAP).
+
+What differs, for goal-conditioned tasks:
+
+- The state is the tactile image with the goal and the previous action, which join the image's
+  convolutional features before the state embedding (the paper's state is the image alone). The
+  goal is also given to the value and the policy beside their embeddings, as goal-conditioned
+  values are built: the encoder learns only from its model, where the goal shows only in the sparse
+  reward, and an embedding that drops it leaves a value blind to which key is asked.
+- The discrete policy learns the value's best one-hot action by cross-entropy (the paper's climbs
+  the value of its Gumbel-softmax relaxation, a point between the one-hot actions the value never
+  learnt); it explores by sampling its softmax (Gumbel-max) with the paper's noise, and acts on its
+  argmax in test episodes and typing (the released code samples when it evaluates).
+- A sub-trajectory that a truncated episode cuts short is masked past its end (the paper does not
+  sample it). Priorities are the TD errors of the value's update; the released code takes them
+  after its policy step, from the policy's actions.
 """
 
 from __future__ import annotations
@@ -120,34 +129,32 @@ class MRQEncoder(nn.Module):
 
 
 class MRQValue(nn.Module):
-    """Twin action values of a state-action embedding, (B, 2)."""
+    """Twin action values of a state-action embedding and the goal, (B, 2)."""
 
-    def __init__(self, config: MRQConfig) -> None:
+    def __init__(self, goal_size: int, config: MRQConfig) -> None:
         super().__init__()
-        hidden = config.hidden_units
-        self.trunks = nn.ModuleList([_MLP(config.state_action_size, hidden, hidden) for _ in range(2)])
+        hidden, inputs = config.hidden_units, config.state_action_size + goal_size
+        self.trunks = nn.ModuleList([_MLP(inputs, hidden, hidden) for _ in range(2)])
         self.heads = nn.ModuleList([nn.Linear(hidden, 1) for _ in range(2)])
         self.apply(_init)
 
-    def forward(self, zsa: torch.Tensor) -> torch.Tensor:
+    def forward(self, zsa: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
+        x = torch.cat([zsa, goals.to(zsa.dtype)], -1)
         return torch.cat(
-            [head(_norm(trunk(zsa))) for trunk, head in zip(self.trunks, self.heads, strict=True)], -1
+            [head(_norm(trunk(x))) for trunk, head in zip(self.trunks, self.heads, strict=True)], -1
         )
 
 
 class MRQPolicy(nn.Module):
-    """The deterministic policy on ``zs``: its pre-activations, and its action (tanh, or a Gumbel-softmax
-    sample of temperature ``gumbel_tau`` over discrete actions)."""
+    """The policy on ``zs`` and the goal: pre-activations, (B, action_size); the action is their tanh
+    for continuous actions, and for discrete ones they are the logits of a softmax."""
 
-    def __init__(self, action_size: int, discrete: bool, config: MRQConfig) -> None:
+    def __init__(self, goal_size: int, action_size: int, config: MRQConfig) -> None:
         super().__init__()
-        self.layers = _MLP(config.state_size, action_size, config.hidden_units, F.relu)
-        self.discrete, self.tau = discrete, config.gumbel_tau
+        self.layers = _MLP(config.state_size + goal_size, action_size, config.hidden_units, F.relu)
 
-    def forward(self, zs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        pre = self.layers(zs)
-        action = F.gumbel_softmax(pre.float(), tau=self.tau) if self.discrete else torch.tanh(pre.float())
-        return action, pre
+    def forward(self, zs: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
+        return self.layers(torch.cat([zs, goals.to(zs.dtype)], -1))
 
 
 # ================================================================= the reward model's encoding
@@ -218,20 +225,14 @@ class MRQAgent(Agent):
             raise ValueError(
                 f"MR.Q needs a Discrete or a one-dimensional Box action space, got {action_space}"
             )
-        scale = 0.5 if self.discrete else 1.0  # one-hot actions span [0, 1], not [-1, 1]
-        self.exploration_noise, self.target_noise, self.noise_clip = (
-            scale * config.exploration_noise,
-            scale * config.target_noise,
-            scale * config.noise_clip,
-        )
         goal_size, previous_size = spaces_sizes(observation_space)
         shape = observation_space["observation"].shape
         channels = int(shape[-1]) if len(shape) == 3 else 1
         features = observation_features(observation_space)
         self.encoder = MRQEncoder(goal_size, previous_size, self.action_size, config, features, channels)
         self.encoder.to(self.device)
-        self.policy = MRQPolicy(self.action_size, self.discrete, config).to(self.device)
-        self.value = MRQValue(config).to(self.device)
+        self.policy = MRQPolicy(goal_size, self.action_size, config).to(self.device)
+        self.value = MRQValue(goal_size, config).to(self.device)
         self.encoder_target, self.policy_target, self.value_target = (
             copy.deepcopy(part).requires_grad_(False) for part in (self.encoder, self.policy, self.value)
         )
@@ -251,23 +252,20 @@ class MRQAgent(Agent):
     @torch.no_grad()
     def policy_action(self, observation: dict, step: int, explore: bool, rng: np.random.Generator,
                       deterministic: bool = False):  # fmt: skip
-        """The policy's action, with Gaussian noise (and for discrete actions a Gumbel-softmax sample)
-        while exploring; greedy otherwise."""
+        """The policy's action while exploring (continuous: with Gaussian noise; discrete: a sample of
+        its softmax, by Gumbel-max); its greedy action otherwise."""
+        images, goals, previous = observation_tensors(observation, self.device)
         with self.autocast():
-            pre = self.policy.layers(self.encoder.zs(*observation_tensors(observation, self.device)))
+            pre = self.policy(self.encoder.zs(images, goals, previous), goals)
         pre = pre.float().cpu().numpy()[0]
         explore = explore and not deterministic
         if self.discrete:
-            if not explore:
-                return int(pre.argmax())
-            gumbel = -np.log(-np.log(rng.uniform(1e-10, 1.0, size=pre.shape)))
-            logits = (pre + gumbel) / self.config.gumbel_tau
-            soft = np.exp(logits - logits.max())
-            soft /= soft.sum()
-            return int((soft + rng.normal(0.0, self.exploration_noise, size=pre.shape)).argmax())
+            if explore:
+                pre = pre - np.log(-np.log(rng.uniform(1e-10, 1.0, size=pre.shape)))
+            return int(pre.argmax())
         action = np.tanh(pre)
         if explore:
-            action = action + rng.normal(0.0, self.exploration_noise, size=action.shape)
+            action = action + rng.normal(0.0, self.config.exploration_noise, size=action.shape)
         return np.clip(action, -1.0, 1.0).astype(np.float32)
 
     # ------------------------------------------------------------- sampling (LAP)
@@ -373,22 +371,31 @@ class MRQAgent(Agent):
         with self.autocast():
             next_zs = self.encoder_target.zs(t["horizon_next_images"][rows, last], t["goals"],
                                              t["horizon_next_previous_actions"][rows, last])  # fmt: skip
-            action, _ = self.policy_target(next_zs)
-            noise = (torch.randn_like(action) * self.target_noise).clamp(-self.noise_clip, self.noise_clip)
-            action = action + noise
+            pre = self.policy_target(next_zs, t["goals"]).float()
             if self.discrete:
-                action = F.one_hot(action.argmax(-1), self.action_size).float()
+                action = F.one_hot(pre.argmax(-1), self.action_size).float()
             else:
-                action = action.clamp(-1.0, 1.0)
-            next_value = self.value_target(self.encoder_target.zsa(next_zs, action)).float().min(-1).values
+                noise = torch.randn_like(pre) * config.target_noise
+                action = (pre.tanh() + noise.clamp(-config.noise_clip, config.noise_clip)).clamp(-1.0, 1.0)
+            next_zsa = self.encoder_target.zsa(next_zs, action)
+            next_value = self.value_target(next_zsa, t["goals"]).float().min(-1).values
         _, reward_scale, target_reward_scale = self.counters[:3].tolist()
         not_done = 1.0 - t["horizon_dones"][rows, last]
         bootstrap = not_done * config.gamma ** span.float() * next_value * target_reward_scale
         return (returns + bootstrap) / reward_scale
 
+    @torch.no_grad()
+    def _best_actions(self, zs: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
+        """The value's best one-hot action in each state (the mean of the twins), (B,)."""
+        batch, actions = len(zs), torch.eye(self.action_size, device=self.device)
+        zsa = self.encoder.zsa(zs.repeat_interleave(self.action_size, 0), actions.repeat(batch, 1))
+        q = self.value(zsa, goals.repeat_interleave(self.action_size, 0)).float().mean(-1)
+        return q.view(batch, self.action_size).argmax(-1)
+
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
         """One step of the value (Huber towards :meth:`_targets`) and of the policy (the value of its
-        actions, its pre-activations penalised); the sampled transitions' priorities renewed."""
+        actions, or for discrete actions the cross-entropy to the value's best; its pre-activations
+        penalised); the sampled transitions' priorities renewed."""
         config, t = self.config, self.tensors(batch)
         with torch.no_grad():
             target = self._targets(t)
@@ -396,7 +403,7 @@ class MRQAgent(Agent):
                 zs = self.encoder.zs(t["images"], t["goals"], t["previous_actions"])
                 zsa = self.encoder.zsa(zs, self._actions(t["actions"]))
         with self.autocast():
-            q = self.value(zsa).float()
+            q = self.value(zsa, t["goals"]).float()
         value_loss = F.smooth_l1_loss(q, target[:, None].expand_as(q))
         self.value_optimiser.zero_grad(set_to_none=True)
         value_loss.backward()
@@ -404,9 +411,12 @@ class MRQAgent(Agent):
         self.value_optimiser.step()
 
         with self.autocast():
-            action, pre = self.policy(zs)
-            policy_value = self.value(self.encoder.zsa(zs, action)).float()
-        policy_loss = -policy_value.mean() + config.pre_activation_weight * pre.float().pow(2).mean()
+            pre = self.policy(zs, t["goals"]).float()
+            if self.discrete:
+                policy_loss = F.cross_entropy(pre, self._best_actions(zs, t["goals"]))
+            else:
+                policy_loss = -self.value(self.encoder.zsa(zs, pre.tanh()), t["goals"]).float().mean()
+        policy_loss = policy_loss + config.pre_activation_weight * pre.float().pow(2).mean()
         self.policy_optimiser.zero_grad(set_to_none=True)
         policy_loss.backward(inputs=list(self.policy.parameters()))
         self.policy_optimiser.step()
