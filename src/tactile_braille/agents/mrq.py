@@ -2,28 +2,31 @@
 goal-conditioned braille tasks, discrete and continuous.
 
 Reads top to bottom: the networks (an encoder of state and state-action embeddings trained by a
-model-based loss, a twin value on the state-action embedding and the goal, a deterministic policy on
-the state embedding and the goal: tanh for continuous actions, logits over discrete ones), the
-reward model's two-hot encoding, the agent's prioritised sampling (LAP), and its updates.
+model-based loss and by the value's, a twin value on the state-action embedding and the goal, a
+deterministic policy on the state embedding and the goal: tanh for continuous actions, logits over
+discrete ones), the reward model's two-hot encoding, the agent's prioritised sampling (LAP), and
+its updates.
 
 As in the paper: every ``target_every`` updates the targets are copied, and the encoder then learns
 for ``target_every`` updates on sub-trajectories (the model unrolled over ``encoder_horizon`` steps:
-next state embedding, reward and episode end, masked after the episode's end), so that the value
-and the policy see a fixed encoder between copies; the value learns a ``value_horizon``-step
-return, scaled by the mean absolute reward of the replay, with clipped double Q and target-policy
-smoothing; the replay samples by the value's TD errors (LAP).
+next state embedding, reward and episode end, masked after the episode's end); the value learns a
+``value_horizon``-step return, scaled by the mean absolute reward of the replay, with clipped double
+Q and target-policy smoothing; the replay samples by the value's TD errors (LAP).
 
-What differs, for goal-conditioned tasks:
+What differs, for goal-conditioned tasks with a sparse reward:
 
 - The state is the tactile image with the goal and the previous action, which join the image's
   convolutional features before the state embedding (the paper's state is the image alone). The
   goal is also given to the value and the policy beside their embeddings, as goal-conditioned
-  values are built: the encoder learns only from its model, where the goal shows only in the sparse
-  reward, and an embedding that drops it leaves a value blind to which key is asked.
+  values are built.
+- The value's loss trains the encoder too, at every update (the paper's encoder learns from its
+  model alone and is fixed between copies). Alone, the model's next-embedding loss shrinks the
+  embeddings towards one point, and a reward that is non-zero on a few presses does not keep in
+  them whether the key under the sensor is the goal.
 - The discrete policy learns the value's best one-hot action by cross-entropy (the paper's climbs
   the value of its Gumbel-softmax relaxation, a point between the one-hot actions the value never
-  learnt); it explores by sampling its softmax (Gumbel-max) with the paper's noise, and acts on its
-  argmax in test episodes and typing (the released code samples when it evaluates).
+  learnt); it explores by sampling its softmax (Gumbel-max), its target is its greedy action, and
+  it acts on its argmax in test episodes and typing (the released code samples when it evaluates).
 - A sub-trajectory that a truncated episode cuts short is masked past its end (the paper does not
   sample it). Priorities are the TD errors of the value's update; the released code takes them
   after its policy step, from the policy's actions.
@@ -393,22 +396,24 @@ class MRQAgent(Agent):
         return q.view(batch, self.action_size).argmax(-1)
 
     def update(self, batch: dict[str, np.ndarray]) -> dict[str, float]:
-        """One step of the value (Huber towards :meth:`_targets`) and of the policy (the value of its
-        actions, or for discrete actions the cross-entropy to the value's best; its pre-activations
-        penalised); the sampled transitions' priorities renewed."""
+        """One step of the value and the encoder (Huber towards :meth:`_targets`) and of the policy (the
+        value of its actions, or for discrete actions the cross-entropy to the value's best; its
+        pre-activations penalised); the sampled transitions' priorities renewed."""
         config, t = self.config, self.tensors(batch)
         with torch.no_grad():
             target = self._targets(t)
-            with self.autocast():
-                zs = self.encoder.zs(t["images"], t["goals"], t["previous_actions"])
-                zsa = self.encoder.zsa(zs, self._actions(t["actions"]))
         with self.autocast():
+            zs = self.encoder.zs(t["images"], t["goals"], t["previous_actions"])
+            zsa = self.encoder.zsa(zs, self._actions(t["actions"]))
             q = self.value(zsa, t["goals"]).float()
         value_loss = F.smooth_l1_loss(q, target[:, None].expand_as(q))
         self.value_optimiser.zero_grad(set_to_none=True)
+        self.encoder_optimiser.zero_grad(set_to_none=True)
         value_loss.backward()
         nn.utils.clip_grad_norm_(self.value.parameters(), config.value_grad_clip)
         self.value_optimiser.step()
+        self.encoder_optimiser.step()
+        zs = zs.detach()
 
         with self.autocast():
             pre = self.policy(zs, t["goals"]).float()
