@@ -38,19 +38,20 @@ run ContinuousAlphabet-v0 sac 4000 0
 run ContinuousAlphabet-v0 td3 4000 0
 
 # Tuned by the benchmark's protocol (docs/benchmark.md, "The tuning protocol"): an Optuna search on tuning
-# seed 100 at the task's official budget (its journal under runs/tune: a stopped search goes on; two
-# processes may share it), then the best settings on fresh seeds 0-4. A finished search's record is
-# committed in results/searches/: on a machine without runs/tune, `run ... --study results/searches`.
-# A trial of the continuous tasks' 25,000 steps takes over an hour on one CPU core (SB3's SAC): on a GPU node,
+# seed 100 at the task's official budget, or at SEARCH_STEPS where given (its journal under runs/tune: a
+# stopped search goes on; two processes may share it), then the best settings on fresh seeds 0-4 at the
+# official budget. A finished search's record is committed in results/searches/: on a machine without
+# runs/tune, `run ... --study results/searches`. A trial of the continuous tasks' 25,000 steps takes over an
+# hour on one CPU core (SB3's SAC), so their searches train 7,500 steps a trial; on a GPU node,
 # `tools/offline_gpu_sweep.sh tune SEARCH_S FINAL_S TASK ALGO TRIALS` runs a search and its final seeds
 # in one job (docs/evaluation.md).
-tuned() {  # TASK ALGO TRIALS
+tuned() {  # TASK ALGO TRIALS [SEARCH_STEPS]
     [[ -z $FILTER || "$1 $2" == *$FILTER* ]] || return 0
-    "$PY" -m tactile_braille.baselines.sb3 tune "$1" "$2" --trials "$3" --study runs/tune
+    "$PY" -m tactile_braille.baselines.sb3 tune "$1" "$2" --trials "$3" --study runs/tune ${4:+--steps "$4"}
     "$PY" -m tactile_braille.baselines.sb3 run "$1" "$2" --study runs/tune --seeds 0 1 2 3 4 --into "$OUT/sb3-tuned"
 }
 tuned DiscreteArrows-v0 dqn 16
 tuned DiscreteAlphabet-v0 dqn 16
 tuned DiscreteArrows-v0 qrdqn 16
-tuned ContinuousArrows-v0 sac 12
-tuned ContinuousArrows-v0 tqc 12
+tuned ContinuousArrows-v0 sac 12 7500
+tuned ContinuousArrows-v0 tqc 12 7500

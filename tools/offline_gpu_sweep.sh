@@ -28,7 +28,7 @@
 #       after SEARCH_S seconds (a trial stopped there is run again by the next search); then the best
 #       settings on SEEDS (default 0-4), a process each, stopped after FINAL_S, into RESULTS (default
 #       results/leaderboard/sb3-tuned). ARGS go to both (--dataset FILE); STEPS, if set, is the search's
-#       budget in place of the task's official one. Then $OUT/tuning.tgz: the study, its summary, the
+#       budget in place of the task's official one (the final seeds train at the official one). Then $OUT/tuning.tgz: the study, its summary, the
 #       results files and each process's log.
 #
 # SWEEP_COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its

@@ -26,17 +26,18 @@ def test_a_search_resumes_and_its_final_runs_record_it(env_datasets, tmp_path):
     assert json.loads((study / "DiscreteArrows-v0__dqn.json").read_text())["best"] == again["best"]
     with pytest.raises(ValueError, match="searches with steps 60, not 90: one study, one protocol"):
         sb3.tune("DiscreteArrows-v0", "dqn", 3, study, steps=90, dataset=dataset)
-    (path,) = sb3.run_seeds("DiscreteArrows-v0", "dqn", study, [7], tmp_path / "out", dataset)
+    (path,) = sb3.run_seeds("DiscreteArrows-v0", "dqn", study, [7], tmp_path / "out", dataset, steps=80)
     tuning = read_result(path)["tuning"]
     record = tmp_path / "record"  # the search's record alone, as it travels to another machine
     record.mkdir()
     (record / "DiscreteArrows-v0__dqn.json").write_text((study / "DiscreteArrows-v0__dqn.json").read_text())
     assert sb3.search_record(record, "DiscreteArrows-v0", "dqn") == json.loads(json.dumps(again))
-    assert read_result(path)["seed"] == 7 and read_result(path)["budget"]["env_steps"] == 60
+    assert read_result(path)["seed"] == 7
+    assert read_result(path)["budget"]["env_steps"] == 80  # the final runs' budget, not the search's
     assert (tuning["trials"], tuning["seed"], tuning["steps"]) == (2, 100, 60)
     assert tuning["best"] == json.loads(json.dumps(again["best"]))
     assert tuning["space"]["goal_selection_strategy"] == {"choice": ["future", "final", "episode"]}
-    assert "| 2 trials |" in leaderboard_markdown(load_results([path]))
+    assert "| 2 trials of 60 steps |" in leaderboard_markdown(load_results([path]))
 
 
 def test_the_protocol_refuses_to_tune_on_reported_seeds_or_report_tuning_seeds(tmp_path):

@@ -9,16 +9,17 @@ on the leaderboard gets (docs/benchmark.md#the-tuning-protocol):
 
 1. **Search** (``tune``): an Optuna study (TPE; median pruning on the typing
    score at a third and two thirds of the budget) over the algorithm's
-   :data:`SEARCH_SPACES`, each trial trained for the task's official budget on
-   one tuning seed (100 unless told; seeds 100-199 are never reported) and
-   scored by typing accuracy, then by steps. The untuned :data:`DEFAULTS` are
+   :data:`SEARCH_SPACES`, each trial trained for the task's official budget
+   (or a stated shorter one, ``--steps``, where a trial at the budget costs
+   too much) on one tuning seed (100 unless told; seeds 100-199 are never
+   reported) and scored by typing accuracy, then by steps. The untuned :data:`DEFAULTS` are
    always among the trials. The study lives in a SQLite file whose trials send
    a heartbeat, so a killed search resumes where it stopped (its unfinished
    trial is failed and run again), and two processes can search one study
    side by side.
 2. **Final runs** (``run``): the best trial's settings, trained on fresh seeds
-   at the same budget; each results file records the search (space, trials,
-   tuning seeds, chosen settings) under ``tuning``.
+   at the task's official budget; each results file records the search (space,
+   trials, tuning seed, the trials' budget, chosen settings) under ``tuning``.
 
     python -m tactile_braille.baselines.sb3 tune DiscreteArrows-v0 dqn --trials 16 --study runs/tune
     python -m tactile_braille.baselines.sb3 run DiscreteArrows-v0 dqn --study runs/tune --seeds 0 1 2 3 4 \\
@@ -49,14 +50,15 @@ DEFAULTS: dict[str, dict] = {
             "learning_starts": 1_000, "target_update_interval": 500, "exploration_fraction": 0.3,
             "exploration_final_eps": 0.05, "goal_selection_strategy": "future", "n_sampled_goal": 4},
     "sac": {"learning_rate": 3e-4, "gamma": 0.99, "batch_size": 64, "learning_starts": 1_000, "tau": 0.005,
-            "goal_selection_strategy": "future", "n_sampled_goal": 4},
+            "ent_coef": "auto", "goal_selection_strategy": "future", "n_sampled_goal": 4},
     "td3": {"learning_rate": 1e-3, "gamma": 0.99, "batch_size": 64, "learning_starts": 1_000, "tau": 0.005,
             "goal_selection_strategy": "future", "n_sampled_goal": 4},
     "qrdqn": {"learning_rate": 5e-5, "gamma": 0.99, "batch_size": 32, "train_freq": 1, "gradient_steps": 1,
               "learning_starts": 1_000, "target_update_interval": 500, "exploration_fraction": 0.3,
               "exploration_final_eps": 0.05, "goal_selection_strategy": "future", "n_sampled_goal": 4},
     "tqc": {"learning_rate": 3e-4, "gamma": 0.99, "batch_size": 64, "learning_starts": 1_000, "tau": 0.005,
-            "top_quantiles_to_drop_per_net": 2, "goal_selection_strategy": "future", "n_sampled_goal": 4},
+            "ent_coef": "auto", "top_quantiles_to_drop_per_net": 2, "goal_selection_strategy": "future",
+            "n_sampled_goal": 4},
 }  # fmt: skip
 """Each algorithm's settings before any search: the library's defaults, but for a learning start, a
 target network, an exploration decay and an update every step that fit these budgets (DQN, QR-DQN)
@@ -109,6 +111,7 @@ _HER = {
     "goal_selection_strategy": Choice(("future", "final", "episode")),
     "n_sampled_goal": Choice((2, 4, 8)),
 }
+_ENTROPY = Choice(("auto", "auto_0.1", "auto_0.01"))  # the entropy weight's start (SB3: "auto" starts at 1)
 SEARCH_SPACES: dict[str, dict[str, Range | Choice]] = {
     "dqn": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
             "batch_size": Choice((32, 64)), "train_freq": Choice((1, 4)), "gradient_steps": Choice((1, 2)),
@@ -117,7 +120,7 @@ SEARCH_SPACES: dict[str, dict[str, Range | Choice]] = {
             "exploration_final_eps": Choice((0.02, 0.05, 0.1)), **_HER},
     "sac": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
             "batch_size": Choice((64, 128)), "learning_starts": Choice((200, 500, 1_000)),
-            "tau": Choice((0.005, 0.01, 0.02)), **_HER},
+            "tau": Choice((0.005, 0.01, 0.02)), "ent_coef": _ENTROPY, **_HER},
     "td3": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
             "batch_size": Choice((64, 128)), "learning_starts": Choice((200, 500, 1_000)),
             "tau": Choice((0.005, 0.01, 0.02)), **_HER},
@@ -129,9 +132,11 @@ SEARCH_SPACES: dict[str, dict[str, Range | Choice]] = {
               **_HER},
     "tqc": {"learning_rate": Range(1e-4, 1e-3, log=True), "gamma": Choice((0.9, 0.95, 0.98, 0.99)),
             "batch_size": Choice((64, 128)), "learning_starts": Choice((200, 500, 1_000)),
-            "tau": Choice((0.005, 0.01, 0.02)), "top_quantiles_to_drop_per_net": Choice((0, 2, 5)), **_HER},
+            "tau": Choice((0.005, 0.01, 0.02)), "ent_coef": _ENTROPY,
+            "top_quantiles_to_drop_per_net": Choice((0, 2, 5)), **_HER},
 }  # fmt: skip
-"""What a search may change, per algorithm (the HER goal strategy and count for all)."""
+"""What a search may change, per algorithm (the HER goal strategy and count for all; for SAC and TQC,
+where their learnt entropy weight starts)."""
 
 
 def _registered(task: str) -> RegisteredTask:
@@ -365,18 +370,19 @@ def search_record(study_dir: Path, task: str, algo: str) -> dict:
 
 
 def run_seeds(
-    task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None, device: str = "cpu"
+    task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None, device: str = "cpu", steps=None
 ) -> list[Path]:
-    """The best trial's settings trained on each of ``seeds`` (none a tuning seed) at the budget the
-    search used, on ``device``; one results file each in ``into``. A file that exists is kept and a seed
-    another process is training is left to it, so calls can go on side by side and after a stop. The
-    search is read from its study in ``study_dir`` or, where there is none (on another machine), from
-    the record ``tune`` writes beside it."""
+    """The best trial's settings trained on each of ``seeds`` (none a tuning seed) for ``steps`` (the
+    task's official budget unless told), on ``device``; one results file each in ``into``. A file that
+    exists is kept and a seed another process is training is left to it, so calls can go on side by side
+    and after a stop. The search is read from its study in ``study_dir`` or, where there is none (on
+    another machine), from the record ``tune`` writes beside it."""
     from tactile_braille._io import LockedError, exclusive_lock
 
     clash = sorted(set(seeds) & set(TUNING_SEEDS))
     if clash:
         raise ValueError(f"seeds {clash} are tuning seeds: report on others")
+    steps = steps or official_budget(task)
     tuning = search_record(study_dir, task, algo)
     Path(into).mkdir(parents=True, exist_ok=True)
     written = []
@@ -385,11 +391,11 @@ def run_seeds(
         try:
             with exclusive_lock(Path(study_dir) / f".{target.name}.lock", f"the run of {target}"):
                 if not target.exists():
-                    model, seconds = train(task, algo, tuning["best"]["params"], tuning["steps"], seed,
-                                           dataset, device=device)  # fmt: skip
+                    model, seconds = train(task, algo, tuning["best"]["params"], steps, seed, dataset,
+                                           device=device)  # fmt: skip
                     result = make_result(
                         score(model, task, dataset), method=f"{ALGORITHMS[algo].label} (tuned)", seed=seed,
-                        env_steps=tuning["steps"],
+                        env_steps=steps,
                         notes=f"tactile_braille.baselines.sb3; {seconds / 60:.1f} min on {_where(device)}",
                         tuning=tuning,
                     )  # fmt: skip
@@ -418,7 +424,10 @@ def main(argv=None) -> int:
     commands.choices["tune"].add_argument("--trials", type=int, required=True, help="trials to finish in all")
     commands.choices["tune"].add_argument("--seed", type=int, default=TUNING_SEEDS[0], help="the tuning seed")
     commands.choices["tune"].add_argument(
-        "--steps", type=int, help="training steps (default: the official budget)"
+        "--steps", type=int, help="each trial's training steps (default: the official budget)"
+    )
+    commands.choices["run"].add_argument(
+        "--steps", type=int, help="each seed's training steps (default: the official budget)"
     )
     commands.choices["run"].add_argument("--seeds", type=int, nargs="+", required=True)
     commands.choices["run"].add_argument(
@@ -438,7 +447,7 @@ def main(argv=None) -> int:
             )
     else:
         for path in run_seeds(
-            args.task, args.algo, args.study, args.seeds, args.into, args.dataset, args.device
+            args.task, args.algo, args.study, args.seeds, args.into, args.dataset, args.device, args.steps
         ):
             report = json.loads(path.read_text())["report"]
             print(f"{path}: accuracy {report['accuracy']:.3f} in {report['total_steps']} steps")

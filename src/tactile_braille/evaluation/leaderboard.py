@@ -79,8 +79,9 @@ class Row:
     optimum: float | None = None
     paper: bool = False
     tuning: str = "-"
-    """How the method's settings were chosen: a library baseline's search (``12 trials``) as its results
-    files record it, else ``-`` (our presets' tuning: docs/notes/results-account.md)."""
+    """How the method's settings were chosen: a library baseline's search (``12 trials``, or ``12 trials
+    of 7,500 steps`` where its trials trained for fewer steps than the row) as its results files record
+    it, else ``-`` (our presets' tuning: docs/notes/results-account.md)."""
     scores: list[float] = field(default_factory=list)
     """Each seed's :func:`typing_score` (the statistics' measure)."""
 
@@ -108,6 +109,9 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
             tuning = result.get("tuning")
             trials = tuning.get("trials") if isinstance(tuning, dict) else None
             searched = f"{trials} trials" if isinstance(trials, int) and not isinstance(trials, bool) else "-"
+            searched_steps = tuning.get("steps") if isinstance(tuning, dict) else None
+            if searched != "-" and isinstance(searched_steps, int) and searched_steps != budget:
+                searched += f" of {searched_steps:,} steps"  # a search on a shorter proxy budget
             rows[key] = Row(result["method"], result["track"], result["fingerprint"], [], [], [],
                             report.get("touch_optimum"), tuning=searched)  # fmt: skip
         taken = seeds.setdefault(key, {})
