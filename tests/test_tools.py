@@ -62,6 +62,11 @@ def offline_gpu_sweep(*args: str, **env: str) -> subprocess.CompletedProcess:
             "TRIALS must be a whole number",
         ),
         (("tune", "500", "500", "DiscreteArrows-v0", "dqn", "4"), {}, "OUT is not set"),
+        (
+            ("tune", "500", "0", "DiscreteArrows-v0", "dqn", "4"),
+            {"OUT": "/tmp"},
+            "FINAL_S must be more than 0 seconds",
+        ),
         (("collect",), {"OUT": "/tmp"}, "tools/offline_gpu_sweep.sh collect WAIT_S"),
         (("collect", "soon"), {"OUT": "/tmp"}, "WAIT_S must be whole seconds, got 'soon'"),
         (("collect", "10"), {"STATE": "/nonexistent/state"}, "OUT is not set"),
@@ -172,7 +177,7 @@ def test_offline_gpu_sweep_tunes_with_workers_sharing_one_study_and_packs_the_se
          "--dataset", str(dataset)],
         capture_output=True, text=True, timeout=600,
         env={**os.environ, "OUT": str(out), "DEVICE": "cpu", "JOBS": "2", "STEPS": "60", "SEEDS": "5",
-             "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
+             "FINAL_STEPS": "80", "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     with tarfile.open(out / "tuning.tgz") as packed:
@@ -188,4 +193,27 @@ def test_offline_gpu_sweep_tunes_with_workers_sharing_one_study_and_packs_the_se
         "./final_5.log",
     } <= names
     assert summary["trials"] == 2 and len(summary["trial_log"]) == 2 and summary["steps"] == 60
-    assert final["seed"] == 5 and final["tuning"]["trials"] == 2 and final["budget"]["env_steps"] == 60
+    assert final["seed"] == 5 and final["tuning"]["trials"] == 2 and final["budget"]["env_steps"] == 80
+
+    # SEARCH_S 0: no search, a further seed from the search's record alone (as committed in results/searches)
+    record = copy / "record"
+    record.mkdir()
+    (record / "DiscreteArrows-v0__dqn.json").write_text(json.dumps(summary))
+    again = tmp_path / "again"
+    again.mkdir()
+    result = subprocess.run(
+        ["bash", str(copy / "tools" / SCRIPT.name), "tune", "0", "240", "DiscreteArrows-v0", "dqn", "2",
+         "--dataset", str(dataset)],
+        capture_output=True, text=True, timeout=600,
+        env={**os.environ, "OUT": str(again), "DEVICE": "cpu", "STUDY": "record", "SEEDS": "6",
+             "FINAL_STEPS": "80", "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert not list(record.glob("*.db"))  # no new study beside the record
+    with tarfile.open(again / "tuning.tgz") as packed:
+        names = set(packed.getnames())
+        sixth = json.loads(
+            packed.extractfile("results/leaderboard/sb3-tuned/DiscreteArrows-v0__dqn__6.json").read()
+        )
+    assert "./final_6.log" in names and not any(name.startswith("./search_") for name in names)
+    assert sixth["tuning"]["best"] == summary["best"] and sixth["budget"]["env_steps"] == 80

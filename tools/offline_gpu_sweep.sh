@@ -25,10 +25,12 @@
 #       on the node, in one job: the Stable-Baselines3 search of `python -m tactile_braille.baselines.sb3
 #       tune TASK ALGO --trials TRIALS` on CUDA (DEVICE to change) by min(JOBS, TRIALS) processes sharing
 #       its study in STUDY (default runs/tune: carry it to go on with a search begun elsewhere), stopped
-#       after SEARCH_S seconds (a trial stopped there is run again by the next search); then the best
-#       settings on SEEDS (default 0-4), a process each, stopped after FINAL_S, into RESULTS (default
-#       results/leaderboard/sb3-tuned). ARGS go to both (--dataset FILE); STEPS, if set, is the search's
-#       budget in place of the task's official one (the final seeds train at the official one). Then $OUT/tuning.tgz: the study, its summary, the
+#       after SEARCH_S seconds (a trial stopped there is run again by the next search; SEARCH_S 0: no
+#       search, the final seeds of a finished one, whose study or record is in STUDY, e.g.
+#       results/searches); then the best settings on SEEDS (default 0-4), a process each, stopped after
+#       FINAL_S, into RESULTS (default results/leaderboard/sb3-tuned). ARGS go to both (--dataset FILE);
+#       STEPS, if set, is the search's budget in place of the task's official one; FINAL_STEPS the final
+#       seeds' (a quick check: their rows are then ranked apart). Then $OUT/tuning.tgz: the study, its summary, the
 #       results files and each process's log.
 #
 # SWEEP_COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its
@@ -177,13 +179,16 @@ tune() {  # SEARCH_S FINAL_S TASK ALGO TRIALS [ARGS...]
     [[ $5 =~ ^[1-9][0-9]*$ ]] || fail "TRIALS must be a whole number of trials, got '$5'"
     [ -n "${OUT:-}" ] || fail "OUT is not set: where should the records go?"
     local search=$1 final=$2 task=$3 algo=$4 trials=$5
+    [ "$final" -gt 0 ] || fail "FINAL_S must be more than 0 seconds (the final seeds' limit)"
     shift 5
     setup
     local study=${STUDY:-runs/tune} results=${RESULTS:-results/leaderboard/sb3-tuned} logs i seed
-    local -a steps=()
+    local -a steps=() final_steps=()
     [ -z "${STEPS:-}" ] || steps=(--steps "$STEPS")
+    [ -z "${FINAL_STEPS:-}" ] || final_steps=(--steps "$FINAL_STEPS")
     logs=$(mktemp -d)
     local jobs=$((${JOBS:-14} < trials ? ${JOBS:-14} : trials))
+    [ "$search" -gt 0 ] || jobs=0  # `timeout 0` would not stop a search: 0 means none
     for ((i = 0; i < jobs; i++)); do  # SIGINT: a stopped trial is marked failed, not left running
         timeout --signal=INT --kill-after=20 "$search" "$PYTHON" -m tactile_braille.baselines.sb3 tune \
             "$task" "$algo" --trials "$trials" --study "$study" --device "${DEVICE:-cuda}" "${steps[@]}" "$@" \
@@ -193,7 +198,8 @@ tune() {  # SEARCH_S FINAL_S TASK ALGO TRIALS [ARGS...]
     wait || true
     for seed in ${SEEDS:-0 1 2 3 4}; do
         timeout --signal=INT --kill-after=20 "$final" "$PYTHON" -m tactile_braille.baselines.sb3 run \
-            "$task" "$algo" --study "$study" --seeds "$seed" --into "$results" --device "${DEVICE:-cuda}" "$@" \
+            "$task" "$algo" --study "$study" --seeds "$seed" --into "$results" --device "${DEVICE:-cuda}" \
+            "${final_steps[@]}" "$@" \
             > "$logs/final_$seed.log" 2>&1 &
     done
     wait || true
