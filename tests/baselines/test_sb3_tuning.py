@@ -4,6 +4,7 @@ seed that resumes from its journal, then final runs on fresh seeds whose results
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +13,7 @@ from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_re
 from tactile_braille.evaluation.results import read_result
 
 ARROWS = "tactile_braille/DiscreteArrows-v0"
+REPOSITORY = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.slow
@@ -80,3 +82,22 @@ def test_the_contrib_algorithms_learn_with_her_and_type(env_datasets, algo, task
     assert type(model).__module__.startswith("sb3_contrib") and model.num_timesteps == 80
     report = sb3.score(model, name, env_datasets[task])
     assert 0.0 <= report.accuracy <= 1.0 and report.total_steps >= report.keys_asked
+
+
+def test_the_committed_searches_read_and_their_final_runs_carry_them_whole():
+    """Each record in results/searches reads as a finished search of its task and algorithm, on a tuning
+    seed, within its search space; the tuned results files of that task and algorithm carry it unchanged,
+    at the task's official budget."""
+    records = sorted((REPOSITORY / "results" / "searches").glob("*.json"))
+    assert records
+    for record in records:
+        task, algo = record.stem.split("__")
+        tuning = sb3.search_record(record.parent, task, algo)
+        assert tuning["seed"] in sb3.TUNING_SEEDS and tuning["trials"] == len(tuning["trial_log"])
+        assert tuning["steps"] <= sb3.official_budget(task)
+        assert set(tuning["best"]["params"]) == set(sb3.SEARCH_SPACES[algo])
+        tuned = REPOSITORY / "results" / "leaderboard" / "sb3-tuned"
+        for final in sorted(tuned.glob(f"{task}__{algo}__*.json")):
+            result = read_result(final)
+            assert result["tuning"] == tuning, final.name
+            assert result["budget"]["env_steps"] == sb3.official_budget(task)
