@@ -30,8 +30,8 @@
 #       results/searches); then the best settings on SEEDS (default 0-4), a process each, stopped after
 #       FINAL_S, into RESULTS (default results/leaderboard/sb3-tuned). ARGS go to both (--dataset FILE);
 #       STEPS, if set, is the search's budget in place of the task's official one; FINAL_STEPS the final
-#       seeds' (a quick check: their rows are then ranked apart). Then $OUT/tuning.tgz: the study, its summary, the
-#       results files and each process's log.
+#       seeds' (a quick check: their rows are then ranked apart). Then $OUT/tuning.tgz: the study, its
+#       summary, the results files and each process's log.
 #
 # SWEEP_COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its
 # settings and --variant NAME among the arguments).

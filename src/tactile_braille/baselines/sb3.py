@@ -12,11 +12,11 @@ on the leaderboard gets (docs/benchmark.md#the-tuning-protocol):
    :data:`SEARCH_SPACES`, each trial trained for the task's official budget
    (or a stated shorter one, ``--steps``, where a trial at the budget costs
    too much) on one tuning seed (100 unless told; seeds 100-199 are never
-   reported) and scored by typing accuracy, then by steps. The untuned :data:`DEFAULTS` are
-   always among the trials. The study lives in a SQLite file whose trials send
-   a heartbeat, so a killed search resumes where it stopped (its unfinished
-   trial is failed and run again), and two processes can search one study
-   side by side.
+   reported) and scored by typing accuracy, then by steps. The untuned
+   :data:`DEFAULTS` are always among the trials. The study lives in a SQLite
+   file whose trials send a heartbeat, so a killed search resumes where it
+   stopped (its unfinished trial is failed and run again), and two processes
+   can search one study side by side.
 2. **Final runs** (``run``): the best trial's settings, trained on fresh seeds
    at the task's official budget; each results file records the search (space,
    trials, tuning seed, the trials' budget, chosen settings) under ``tuning``.

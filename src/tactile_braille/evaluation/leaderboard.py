@@ -106,12 +106,11 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
         key = (result["task"], result["method"], result["track"], result["fingerprint"], budget)
         report = result["report"]
         if key not in rows:
-            tuning = result.get("tuning")
-            trials = tuning.get("trials") if isinstance(tuning, dict) else None
+            tuning = result.get("tuning") if isinstance(result.get("tuning"), dict) else {}
+            trials, trial_steps = tuning.get("trials"), tuning.get("steps")
             searched = f"{trials} trials" if isinstance(trials, int) and not isinstance(trials, bool) else "-"
-            searched_steps = tuning.get("steps") if isinstance(tuning, dict) else None
-            if searched != "-" and isinstance(searched_steps, int) and searched_steps != budget:
-                searched += f" of {searched_steps:,} steps"  # a search on a shorter proxy budget
+            if searched != "-" and isinstance(trial_steps, int) and trial_steps != budget:
+                searched += f" of {trial_steps:,} steps"  # its trials trained for fewer steps than the row
             rows[key] = Row(result["method"], result["track"], result["fingerprint"], [], [], [],
                             report.get("touch_optimum"), tuning=searched)  # fmt: skip
         taken = seeds.setdefault(key, {})
