@@ -28,7 +28,9 @@ def test_a_search_resumes_and_its_final_runs_record_it(env_datasets, tmp_path):
     assert json.loads((study / "DiscreteArrows-v0__dqn.json").read_text())["best"] == again["best"]
     with pytest.raises(ValueError, match="searches with steps 60, not 90: one study, one protocol"):
         sb3.tune("DiscreteArrows-v0", "dqn", 3, study, steps=90, dataset=dataset)
-    (path,) = sb3.run_seeds("DiscreteArrows-v0", "dqn", study, [7], tmp_path / "out", dataset, steps=80)
+    (path,) = sb3.run_seeds("DiscreteArrows-v0", "dqn", study, [7], tmp_path / "out", dataset, steps=80,
+                            checkpoints=tmp_path / "checkpoints")  # fmt: skip
+    assert list((tmp_path / "checkpoints").iterdir()) == []  # the seed's folder went with its results file
     tuning = read_result(path)["tuning"]
     record = tmp_path / "record"  # the search's record alone, as it travels to another machine
     record.mkdir()
@@ -82,6 +84,40 @@ def test_the_contrib_algorithms_learn_with_her_and_type(env_datasets, algo, task
     assert type(model).__module__.startswith("sb3_contrib") and model.num_timesteps == 80
     report = sb3.score(model, name, env_datasets[task])
     assert 0.0 <= report.accuracy <= 1.0 and report.total_steps >= report.keys_asked
+
+
+class Stopped(Exception):
+    """The process stopping (killed, the machine taken back) right after a checkpoint."""
+
+
+@pytest.mark.slow
+def test_a_stopped_run_goes_on_from_its_latest_checkpoint(env_datasets, tmp_path, monkeypatch):
+    dataset, folder = env_datasets[ARROWS], tmp_path / "checkpoints"
+    settings = {"learning_starts": 30, "batch_size": 8}  # past the first episode (HER samples whole ones)
+    save = sb3._save_checkpoint
+
+    def train(seed):
+        return sb3.train(
+            "DiscreteArrows-v0", "dqn", settings, 60, seed, dataset, checkpoints=folder, every=20
+        )
+
+    def save_then_stop(model, where, seconds):
+        save(model, where, seconds)
+        if model.num_timesteps == 40:
+            raise Stopped
+
+    monkeypatch.setattr(sb3, "_save_checkpoint", save_then_stop)
+    with pytest.raises(Stopped):
+        train(seed=3)
+    assert sorted(p.name for p in folder.iterdir()) == ["run.json", "step-40"]  # the older one removed
+    monkeypatch.setattr(sb3, "_save_checkpoint", save)
+    with pytest.raises(ValueError, match=r"holds checkpoints of another run \(its \['seed'\] differ\)"):
+        train(seed=4)
+    model, seconds = train(seed=3)
+    assert model.num_timesteps == 60 and seconds > 0
+    assert model.replay_buffer.size() == 59  # 39 stored before the stop (the 40th on its way), 20 after
+    assert model._n_updates == 29  # 9 before the stop (steps 31-39) carried on, and 20 after
+    assert sorted(p.name for p in folder.iterdir()) == ["run.json", "step-40"]  # none at the budget's end
 
 
 def test_the_committed_searches_read_and_their_final_runs_carry_them_whole():

@@ -30,7 +30,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -163,6 +165,10 @@ def check_algo(task: str, algo: str) -> None:
         raise ValueError(f"{algo} takes {takes} actions; {task}'s are {kind}: use one of {able}")
 
 
+def _env(task: str, dataset=None):
+    return gym.make(f"tactile_braille/{task}", **({"dataset": str(dataset)} if dataset else {}))
+
+
 def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None, device="cpu"):
     """An SB3 (or SB3-Contrib) model of ``algo`` with ``settings`` (:data:`DEFAULTS`' names) on ``task``,
     its replay holding the whole run, its networks on ``device``."""
@@ -174,11 +180,10 @@ def make_model(task: str, algo: str, settings: dict, steps: int, seed: int, data
     settings["learning_starts"] = min(settings["learning_starts"], steps)
     if ALGORITHMS[algo].actions == "continuous":
         settings["policy_kwargs"] = {"share_features_extractor": True}
-    env = gym.make(f"tactile_braille/{task}", **({"dataset": str(dataset)} if dataset else {}))
     model_class = ALGORITHMS[algo].model_class()
     return model_class(
-        "MultiInputPolicy", env, replay_buffer_class=HerReplayBuffer, replay_buffer_kwargs=her,
-        buffer_size=max(steps, 1), seed=seed, device=device, verbose=0, **settings,
+        "MultiInputPolicy", _env(task, dataset), replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs=her, buffer_size=max(steps, 1), seed=seed, device=device, verbose=0, **settings,
     )  # fmt: skip
 
 
@@ -188,26 +193,88 @@ def score(model, task: str, dataset=None) -> TypingReport:
                            dataset=dataset)  # fmt: skip
 
 
+CHECKPOINT_EVERY = 2_500
+"""Environment steps between a final run's checkpoints (a tenth of the continuous tasks' budget)."""
+
+
 def train(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=None, checks=(), check=None,
-          device="cpu"):  # fmt: skip
+          device="cpu", checkpoints: Path | None = None, every: int = CHECKPOINT_EVERY):  # fmt: skip
     """Train for ``steps`` environment steps on ``device`` (one CPU thread); ``check(steps_so_far,
     report)`` is called with a typing report after each step count in ``checks`` (a search's pruning).
-    Returns (model, seconds)."""
+
+    With ``checkpoints`` (a folder), the model, its optimisers and its replay are saved there every
+    ``every`` steps, and a call that finds a checkpoint of the same run (task, algorithm, settings,
+    budget, seed) goes on from it: a stopped run loses at most ``every`` steps. A resumed run is not
+    bit-identical to an unbroken one (the random generators restart from ``seed`` and the steps done),
+    and its replay's episode in progress is closed where it stopped. Returns (model, seconds of training
+    over all its calls)."""
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
     torch.set_num_threads(1)
-    model = make_model(task, algo, settings, steps, seed, dataset, device)
+    run = {"task": task, "algo": algo, "settings": settings, "steps": steps, "seed": seed}
+    run = json.loads(json.dumps(run, default=_plain))  # as its claim on a checkpoint folder reads back
+    resumed = _resume(checkpoints, run, dataset, device) if checkpoints is not None else None
+    model, done, seconds_before = resumed or (make_model(task, algo, settings, steps, seed, dataset, device),
+                                              0, 0.0)  # fmt: skip
+    start = time.perf_counter()
 
-    class Checks(BaseCallback):
+    class Steps(BaseCallback):
         def _on_step(self) -> bool:
             if self.num_timesteps in checks and check is not None:
                 check(self.num_timesteps, score(self.model, task, dataset))
+            if checkpoints is not None and self.num_timesteps % every == 0 and self.num_timesteps < steps:
+                _save_checkpoint(self.model, checkpoints, seconds_before + time.perf_counter() - start)
             return True
 
-    start = time.perf_counter()
-    model.learn(steps, callback=Checks())
-    return model, time.perf_counter() - start
+    model.learn(steps - done, callback=Steps(), reset_num_timesteps=done == 0)
+    return model, seconds_before + time.perf_counter() - start
+
+
+def _save_checkpoint(model, folder: Path, seconds: float) -> None:
+    """Save the model and its replay as ``step-N`` in ``folder``, whole or not at all (written under
+    another name, then renamed), and remove the older ones."""
+    final = folder / f"step-{model.num_timesteps}"
+    partial = folder / f".{final.name}.partial"
+    shutil.rmtree(partial, ignore_errors=True)
+    partial.mkdir(parents=True)
+    model.save(partial / "model.zip")
+    model.save_replay_buffer(partial / "replay.pkl")
+    (partial / "progress.json").write_text(json.dumps({"steps": model.num_timesteps, "seconds": seconds}))
+    partial.rename(final)
+    for older in folder.glob("step-*"):
+        if older != final:
+            shutil.rmtree(older)
+
+
+def _resume(folder: Path, run: dict, dataset, device: str):
+    """(model, steps done, seconds so far) from the latest checkpoint in ``folder``, or None where there is
+    none; the folder is claimed for ``run``, and one of another run is refused before anything is
+    loaded."""
+    folder.mkdir(parents=True, exist_ok=True)
+    claim = folder / "run.json"
+    if claim.exists():
+        theirs = json.loads(claim.read_text())
+        if theirs != run:
+            differ = sorted(name for name in run if theirs.get(name) != run[name])
+            raise ValueError(f"{folder} holds checkpoints of another run (its {differ} differ): "
+                             f"remove it or checkpoint elsewhere")  # fmt: skip
+    else:
+        with atomic_path(claim) as path:
+            path.write_text(json.dumps(run, indent=1))
+    saved = sorted(folder.glob("step-*"), key=lambda p: int(p.name.removeprefix("step-")))
+    if not saved:
+        return None
+    latest = saved[-1]
+    progress = json.loads((latest / "progress.json").read_text())
+    model = ALGORITHMS[run["algo"]].model_class().load(latest / "model.zip", env=_env(run["task"], dataset),
+                                                       device=device)  # fmt: skip
+    with warnings.catch_warnings():  # SB3 warns that the episode in progress is closed: it is, on purpose
+        warnings.filterwarnings("ignore", "The last trajectory in the replay buffer will be truncated")
+        model.load_replay_buffer(latest / "replay.pkl")
+    model.set_random_seed(run["seed"] + progress["steps"])
+    model._last_obs = None  # the environment is new: the next learn starts an episode
+    return model, progress["steps"], progress["seconds"]
 
 
 def objective(report: TypingReport) -> float:
@@ -369,14 +436,15 @@ def search_record(study_dir: Path, task: str, algo: str) -> dict:
     return tuning
 
 
-def run_seeds(
-    task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None, device: str = "cpu", steps=None
-) -> list[Path]:
+def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None, device: str = "cpu",
+              steps=None, checkpoints: Path | None = None) -> list[Path]:  # fmt: skip
     """The best trial's settings trained on each of ``seeds`` (none a tuning seed) for ``steps`` (the
     task's official budget unless told), on ``device``; one results file each in ``into``. A file that
     exists is kept and a seed another process is training is left to it, so calls can go on side by side
-    and after a stop. The search is read from its study in ``study_dir`` or, where there is none (on
-    another machine), from the record ``tune`` writes beside it."""
+    and after a stop. With ``checkpoints`` (a folder), each seed checkpoints in a subfolder of its own and
+    a stopped seed goes on from its latest checkpoint (see :func:`train`); the subfolder is removed once
+    the seed's results file is written. The search is read from its study in ``study_dir`` or, where
+    there is none (on another machine), from the record ``tune`` writes beside it."""
     from tactile_braille._io import LockedError, exclusive_lock
 
     clash = sorted(set(seeds) & set(TUNING_SEEDS))
@@ -391,8 +459,9 @@ def run_seeds(
         try:
             with exclusive_lock(Path(study_dir) / f".{target.name}.lock", f"the run of {target}"):
                 if not target.exists():
+                    saves = None if checkpoints is None else Path(checkpoints) / target.stem
                     model, seconds = train(task, algo, tuning["best"]["params"], steps, seed, dataset,
-                                           device=device)  # fmt: skip
+                                           device=device, checkpoints=saves)  # fmt: skip
                     result = make_result(
                         score(model, task, dataset), method=f"{ALGORITHMS[algo].label} (tuned)", seed=seed,
                         env_steps=steps,
@@ -400,6 +469,8 @@ def run_seeds(
                         tuning=tuning,
                     )  # fmt: skip
                     write_result(result, target)
+                    if saves is not None:
+                        shutil.rmtree(saves)
         except LockedError:
             continue  # another process trains this seed
         written.append(target)
@@ -431,6 +502,11 @@ def main(argv=None) -> int:
     )
     commands.choices["run"].add_argument("--seeds", type=int, nargs="+", required=True)
     commands.choices["run"].add_argument(
+        "--checkpoints", type=Path, default=Path("runs/checkpoints"),
+        help=f"folder where each seed saves its model and replay every {CHECKPOINT_EVERY:,} steps, and where "
+        "a stopped seed goes on from (default: runs/checkpoints)",
+    )  # fmt: skip
+    commands.choices["run"].add_argument(
         "--into", type=Path, required=True, help="folder of the results files"
     )
     args = parser.parse_args(argv)
@@ -446,9 +522,9 @@ def main(argv=None) -> int:
                 f"{best['total_steps']} steps with {best['params']}"
             )
     else:
-        for path in run_seeds(
-            args.task, args.algo, args.study, args.seeds, args.into, args.dataset, args.device, args.steps
-        ):
+        written = run_seeds(args.task, args.algo, args.study, args.seeds, args.into, args.dataset,
+                            args.device, args.steps, args.checkpoints)  # fmt: skip
+        for path in written:
             report = json.loads(path.read_text())["report"]
             print(f"{path}: accuracy {report['accuracy']:.3f} in {report['total_steps']} steps")
     return 0
