@@ -20,6 +20,8 @@ on the leaderboard gets (docs/benchmark.md#the-tuning-protocol):
 2. **Final runs** (``run``): the best trial's settings, trained on fresh seeds
    at the task's official budget; each results file records the search (space,
    trials, tuning seed, the trials' budget, chosen settings) under ``tuning``.
+   Each seed checkpoints as it trains, and a stopped seed goes on from its
+   latest checkpoint.
 
     python -m tactile_braille.baselines.sb3 tune DiscreteArrows-v0 dqn --trials 16 --study runs/tune
     python -m tactile_braille.baselines.sb3 run DiscreteArrows-v0 dqn --study runs/tune --seeds 0 1 2 3 4 \\
