@@ -111,6 +111,7 @@ def test_a_stopped_run_goes_on_from_its_latest_checkpoint(env_datasets, tmp_path
         train(seed=3)
     assert sorted(p.name for p in folder.iterdir()) == ["run.json", "step-40"]  # the older one removed
     monkeypatch.setattr(sb3, "_save_checkpoint", save)
+    (folder / ".step-60.partial").mkdir()  # a save cut short is not a checkpoint
     with pytest.raises(ValueError, match=r"holds checkpoints of another run \(its \['seed'\] differ\)"):
         train(seed=4)
     model, seconds = train(seed=3)

@@ -264,6 +264,8 @@ def _resume(folder: Path, run: dict, dataset, device: str):
     else:
         with atomic_path(claim) as path:
             path.write_text(json.dumps(run, indent=1))
+    for unfinished in folder.glob(".step-*.partial"):  # a save the stop cut short
+        shutil.rmtree(unfinished)
     saved = sorted(folder.glob("step-*"), key=lambda p: int(p.name.removeprefix("step-")))
     if not saved:
         return None
