@@ -185,6 +185,41 @@ def test_a_move_into_the_generic_nothing_is_worth_its_share_of_that_state_s_valu
     assert values[None][0] == pytest.approx(0.9 * generic) and values[0.0][0] == 0.0
 
 
+def test_a_test_episode_remembers_where_each_move_led_and_plans_again(discrete_env):
+    """A move the graph makes a lottery (UP from key 0 reaches key 3 four times in ten, else stays) is
+    worth more than a sure path of three moves; once a test episode has seen it stay, ``outcome_memory``
+    plans on what it saw and takes the path, where without it (or in training) the lottery is drawn
+    again. A new episode forgets."""
+    up, right = 0, 3
+    observation, _ = discrete_env.reset(seed=0)
+
+    goal = {**observation, "desired_goal": np.eye(4, dtype=np.float32)[3]}
+
+    def two_actions(memory: bool, explore: bool) -> tuple[PlannerAgent, list[int]]:
+        config = PlannerConfig(gamma=0.9, repeat_penalty=0.0, outcome_memory=memory, epsilon_start=0.0,
+                               epsilon_end=0.0)  # fmt: skip
+        agent = PlannerAgent(discrete_env.observation_space, discrete_env.action_space, config)
+        states = len(agent.state_class)
+        moves = np.zeros((states, MOVES, states))
+        moves[np.arange(states), :, np.arange(states)] = 1.0  # every move stays, but:
+        moves[[0, 1, 2], right] = np.eye(states)[[1, 2, 3]]  # RIGHT walks keys 0, 1, 2, 3
+        moves[0, up] = 0.4 * np.eye(states)[3] + 0.6 * np.eye(states)[0]  # the lottery
+        given_graph(agent, moves)
+        agent.read = lambda frames, batch_size=512: np.eye(agent.classes)[[0]]  # it stays on key 0
+        rng = np.random.default_rng(0)
+        first = agent.policy_action(goal, 10**6, explore=explore, rng=rng)
+        moved = {**goal, "previous_action": np.eye(5, dtype=np.float32)[first]}
+        return agent, [first, agent.policy_action(moved, 10**6, explore=explore, rng=rng)]
+
+    agent, actions = two_actions(memory=True, explore=False)
+    assert agent._values[3, 0] == pytest.approx(0.9 * 0.4 / (1 - 0.9 * 0.6))  # above the path's 0.9 ** 3
+    assert actions == [up, right] and agent._outcomes == {(0, up): 0}
+    assert two_actions(memory=False, explore=False)[1] == [up, up]
+    assert two_actions(memory=True, explore=True)[1] == [up, up]  # training draws as before
+    assert agent.policy_action(goal, 10**6, explore=False, rng=np.random.default_rng(0)) == up
+    assert agent._outcomes == {}  # a new episode: the lottery again
+
+
 def test_backtracking_labels_the_frames_before_a_press_with_the_keys_they_show(discrete_env):
     """Scripted episodes on the real environment: each frame before a press is labelled, back
     through the true graph, with the key the sensor was on (the grid's edge stops the backtracking

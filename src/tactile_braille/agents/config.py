@@ -556,6 +556,10 @@ class PlannerConfig(AgentConfig):
             frame and move; None: off.
         first_press: whether a test episode (and typing) may PRESS on its first frame (False: it moves
             first).
+        outcome_memory: in test episodes (and typing), a move taken from a believed state leads, for
+            the rest of the episode, to the state it was seen to lead to, and the plan is made again on
+            that: the world's moves are deterministic where the sensor stands, so a move that did not
+            reach a key is not a draw to be made again. False: every move is the graph's draw.
     """
 
     gamma: float = 0.9
@@ -587,6 +591,7 @@ class PlannerConfig(AgentConfig):
     lost_value: float | None = None
     press_reading: float | None = None
     first_press: bool = True
+    outcome_memory: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()

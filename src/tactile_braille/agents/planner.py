@@ -231,6 +231,8 @@ class PlannerAgent(Agent):
         self._beliefs: dict[bool, np.ndarray] = {}  # the belief of each stream's episode (train, test)
         self._readings: dict[bool, np.ndarray] = {}  # the reading of each stream's last frame
         self._taken: dict[bool, np.ndarray] = {}  # the actions taken from each believed state in it
+        self._outcomes: dict[tuple[int, int], int] = {}  # ``outcome_memory``: the test episode's moves
+        self._episode_plans: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # its moves, values by goal
         self._plan()
 
     # ------------------------------------------------------------ acting
@@ -260,7 +262,8 @@ class PlannerAgent(Agent):
         reading = self.read(observation["observation"][None])[0].astype(np.float64)
         previous = np.asarray(observation["previous_action"])
         last = self._beliefs.get(stream)
-        if not previous.any() or last is None:  # a new episode
+        new_episode = not previous.any() or last is None
+        if new_episode:
             self._taken[stream] = np.zeros((len(self.state_class), self.actions))
             belief = self._place(reading, None, None)
         elif self.config.filter:
@@ -270,6 +273,8 @@ class PlannerAgent(Agent):
         else:
             belief = self._place(reading, last, int(self.action_indices(previous[None])[0]))
         belief = belief / max(belief.sum(), 1e-300)
+        if not stream and self.config.outcome_memory:
+            self._remember_outcome(None if new_episode else last, previous, belief)
         self._beliefs[stream] = belief
         self._readings[stream] = reading
         return belief
@@ -282,11 +287,42 @@ class PlannerAgent(Agent):
             return place_entry(reading, action)
         return place(reading, before, PRESS if action is None else action, self.config.nothing_memory)
 
-    def action_values(self, belief: np.ndarray, goal: int) -> np.ndarray:
+    def _remember_outcome(self, last: np.ndarray | None, previous: np.ndarray, belief: np.ndarray) -> None:
+        """``outcome_memory``: note the state the test stream's last move led to from the state believed
+        before it (``last`` None: a new episode, which forgets them all)."""
+        if last is None:
+            self._outcomes, self._episode_plans = {}, {}
+            return
+        action = int(self.action_indices(previous[None])[0])
+        if action == PRESS:
+            return
+        seen = (int(last.argmax()), action)
+        outcome = int(belief.argmax())
+        if self._outcomes.get(seen) != outcome:
+            self._outcomes[seen] = outcome
+            self._episode_plans = {}  # replanned with it
+
+    def _model(self, goal: int, episode: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The moves and the goal's values a plan acts on: the graph's, or in the test episode with
+        ``outcome_memory`` the graph with each move already seen from a state leading where it led."""
+        if not (episode and self._outcomes):
+            return self._moves, self._values[goal]
+        if goal not in self._episode_plans:
+            moves = self._moves.copy()
+            for (state, move), outcome in self._outcomes.items():
+                moves[state, move] = 0.0
+                moves[state, move, outcome] = 1.0
+            rewards = (self.state_class == goal).astype(np.float64)[None]
+            self._episode_plans[goal] = (moves, self._value_iteration(moves, rewards)[0])
+        return self._episode_plans[goal]
+
+    def action_values(self, belief: np.ndarray, goal: int, episode: bool = False) -> np.ndarray:
         """QMDP values of the actions under ``belief`` (over states) for the goal key ``goal``: the
-        moves', then PRESS's (the belief on the goal)."""
+        moves', then PRESS's (the belief on the goal); ``episode``: on the test episode's model
+        (:meth:`_model`)."""
         gamma = self.config.gamma
-        moves = gamma * np.einsum("s,smt,t->m", belief, self._moves, self._values[goal])
+        graph, values = self._model(goal, episode)
+        moves = gamma * np.einsum("s,smt,t->m", belief, graph, values)
         if self.config.optimism:
             seen = belief @ (self._visits >= 1.0)
             moves = np.where(seen >= 0.5, moves, gamma)
@@ -310,12 +346,12 @@ class PlannerAgent(Agent):
             action = self._random_index(rng)
         else:
             goal = int(np.argmax(observation["desired_goal"]))
-            values = self.action_values(belief, goal)
+            values = self.action_values(belief, goal, episode=not explore)
             action = int((values - self.config.repeat_penalty * taken).argmax())
             test_press = action == PRESS and not explore
             if test_press and (self._unread_goal(goal) or self._first_frame(observation)):
                 belief, state, taken = self._restart(observation)  # from the frame, and no press
-                values = self.action_values(belief, goal)
+                values = self.action_values(belief, goal, episode=True)
                 values[PRESS] = -np.inf
                 action = int((values - self.config.repeat_penalty * taken).argmax())
         self._taken[explore][state, action] += 1
@@ -472,6 +508,12 @@ class PlannerAgent(Agent):
         self._visits = self.graph.visits.double().cpu().numpy()
         self._prior = self.graph.prior.double().cpu().numpy()
         rewards = (np.arange(self.keys)[:, None] == self.state_class[None]).astype(np.float64)
+        self._values = self._value_iteration(self._moves, rewards)
+        self._outcomes, self._episode_plans = {}, {}
+
+    def _value_iteration(self, moves: np.ndarray, rewards: np.ndarray) -> np.ndarray:
+        """Values (goals, states) on ``moves`` (states, moves, states) of pressing worth ``rewards``
+        (goals, states), ``planning_sweeps`` sweeps."""
         values = rewards.copy()
         lost = self.config.lost_value
         for _ in range(self.config.planning_sweeps):
@@ -479,13 +521,13 @@ class PlannerAgent(Agent):
             if lost is not None:  # the generic nothing, entered from elsewhere
                 ahead = values.copy()
                 ahead[:, self.lost_states] *= lost
-            backed = self.config.gamma * np.einsum("smt,gt->gsm", self._moves, ahead).max(-1)
+            backed = self.config.gamma * np.einsum("smt,gt->gsm", moves, ahead).max(-1)
             if lost is not None:  # acting from it, its own moves as they are
                 backed[:, self.lost_states] = self.config.gamma * np.einsum(
-                    "smt,gt->gsm", self._moves[self.lost_states], values
+                    "smt,gt->gsm", moves[self.lost_states], values
                 ).max(-1)
             values = np.maximum(rewards, backed)
-        self._values = values
+        return values
 
     def load_state_dict(self, state: dict) -> None:
         super().load_state_dict(state)
