@@ -62,7 +62,8 @@ VARIANTS = {
     # on the continuous ones the entry states and the exploration that presses 8 times in 10; on the
     # discrete ones the occupancy its backtracking reads with and the worthless generic nothing of
     # its value iteration; on the continuous ones the test press that waits for a frame showing the
-    # goal (at 0.8 since commit 519e9cf, 0.5 before), and the first frame's press.
+    # goal (at 0.8 since commit 519e9cf, 0.5 before), and the first frame's press; on the continuous
+    # alphabet the test episodes' memory of where each move led.
     "planner-no-filter": ("fast-tactile", {"agent": {"filter": False}}),
     "planner-no-optimism": ("fast-tactile", {"agent": {"optimism": False}}),
     "planner-no-repeat-penalty": ("fast-tactile", {"agent": {"repeat_penalty": 0.0}}),
@@ -73,6 +74,7 @@ VARIANTS = {
     "planner-no-occupancy": ("fast-tactile", {"agent": {"backtrack_prior": False}}),
     "planner-no-lost-value": ("fast-tactile", {"agent": {"lost_value": None}}),
     "planner-no-press-reading": ("fast-tactile", {"agent": {"press_reading": None}}),
+    "planner-no-outcome-memory": ("fast-tactile", {"agent": {"outcome_memory": False}}),
     "planner-press-reading-0.5": ("fast-tactile", {"agent": {"press_reading": 0.5}}),
     "planner-first-press": ("fast-tactile", {"agent": {"first_press": True}}),
 }

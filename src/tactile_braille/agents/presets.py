@@ -107,7 +107,7 @@ TASK_PRESETS: dict[str, TaskPresets] = {
             # the sensor is, and the actor, which acts on touch alone, learns from that judgement.
             "agent": {"critic_pose": True},
         },
-        planner_agent={"move": 0.9, "lost_value": 0.0},
+        planner_agent={"move": 0.9, "lost_value": 0.0, "outcome_memory": True},
     ),
 }  # fmt: skip
 """The presets' numbers for each registered braille task (:data:`~tactile_braille._tasks.REGISTERED_TASKS`),
@@ -264,7 +264,8 @@ def planner_changes(task: str) -> dict[str, Any]:
     with the move asked is none of its five actions). On the continuous arrows, in test episodes and
     typing, it presses only where the frame itself reads the goal at 0.8 or more (``press_reading``),
     and never on an episode's first frame (``first_press`` False). On the continuous alphabet its moves
-    are 18 mm (``move`` 0.9), shorter than nearly every key along a row. On the discrete tasks its
+    are 18 mm (``move`` 0.9), shorter than nearly every key along a row, and its test episodes and
+    typing plan on where each move already taken led (``outcome_memory``). On the discrete tasks its
     backtracking weighs each state by how often it is occupied (``backtrack_prior``); on the discrete
     tasks and the continuous alphabet a move into the generic *nothing* is worth none of that state's
     value (``lost_value`` 0). Each was tuned on seeds 100-102; docs/notes/key-graph-planner.md and
