@@ -27,7 +27,10 @@ seen from the believed state is worth ``gamma`` (optimism, so that the run
 explores it). ``repeat_penalty`` takes value off an action already taken from
 the believed state in the episode (in the generic *nothing*, an episode's start
 off the keys, only after ``free_repeats``: there repeating the best move is a
-straight line out, until it meets the workspace's edge).
+straight line out, until it meets the workspace's edge). With ``outcome_memory``
+a test episode plans on the graph with each move it took from a believed state
+leading where it led: a move the graph makes a draw (a misread key, the
+workspace's edge) is not drawn again from the same state.
 Exploring, it acts at random with the probability ``epsilon``.
 
 The generic *nothing* is every cell off the keys at once, and its pooled moves reach each key beside
