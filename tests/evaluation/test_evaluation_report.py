@@ -392,6 +392,8 @@ def records_tree(tmp_path):
     runs += [write_record(results / "fast" / f"f_{s}", fast, s, [0.97, 1.0], 1.0, 242) for s in (0, 1)]
     runs += [write_record(results / "relabel" / f"r_{s}", relabel, s, [0.9, 1.0], 1.0, 245) for s in (0, 1)]
     ablations = [write_record(results / "ablation-x" / "p_7", paper, 7, [0.2, 0.5], 0.5, 400)]
+    shorter = replace_settings(paper, {"epochs": 2})  # the preset's settings, trained for fewer epochs
+    ablations.append(write_record(results / "ablation-x" / "p_8", shorter, 8, [0.1, 0.3], 0.25, 600))
     write_record(results / "tuning" / "DAr_relabel-all_100", relabel, 100, [0.3, 0.96], 1.0, 250)
     study = results / "diagnostics" / "gpu-node"
     write_record(study / "DiscreteArrows-v0__dqn__0", paper, 0, [0.4, 0.97], 1.0, 269)
@@ -408,12 +410,16 @@ def test_a_presets_own_rows_are_the_headline_and_the_rest_depart(records_tree):
     own, departed = split_groups(load_records(runs), load_records(ablations))
     assert [key[2] for key in own] == ["fast, fp32", "paper, bf16"]
     assert [len(records) for records in own.values()] == [2, 2]
-    # A departure is named by what differs; an ablation's runs depart even with the preset's own settings.
+    # A departure is named by what differs; an ablation's runs depart even with the preset's own settings,
+    # and are named by their epochs where those are not the preset's.
     assert [key[2] for key in departed] == [
+        "paper, bf16, 2 epochs, run as an ablation",
         "paper, bf16, replay.relabel=all",
         "paper, bf16, run as an ablation",
     ]
-    assert [len(records) for records in departed.values()] == [2, 1]
+    assert [len(records) for records in departed.values()] == [1, 2, 1]
+    shorter = departed["DiscreteArrows-v0", "dqn", "paper, bf16, 2 epochs, run as an ablation"]
+    assert [r.seed for r in shorter] == [8]
     assert departure_text("paper, bf16, replay.relabel=all, taps=2") == "replay.relabel=all, taps=2"
     assert departure_text("paper, bf16") == "" and preset_of("fast-tactile, fp32, x=1") == "fast-tactile"
 
@@ -459,9 +465,10 @@ def test_the_results_pages_are_written_whole_and_again_byte_for_byte(records_tre
     assert "## Departures from `paper` (track `tactile`)" in ablated
     rows = [line for line in ablated.splitlines() if line.startswith("| disc arrow")]
     assert [row.split(" | ")[2] for row in rows] == [
-        "none: the preset's own row", "replay.relabel=all", "run as an ablation"
+        "none: the preset's own row", "2 epochs, run as an ablation", "replay.relabel=all",
+        "run as an ablation",
     ]  # fmt: skip
-    assert rows[2].endswith("| `results/ablation-x/` |")  # an ablation with the preset's settings
+    assert rows[3].endswith("| `results/ablation-x/` |")  # an ablation with the preset's settings
     assert (
         "## DiscreteArrows-v0, DQN (paper, bf16, replay.relabel=all), track `tactile`"
         in text["results-runs.md"]

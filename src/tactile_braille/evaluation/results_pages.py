@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_braille._io import atomic_path
-from tactile_braille.agents.presets import PRESET_TRACKS, PRESETS
+from tactile_braille.agents.presets import PRESET_TRACKS, PRESETS, preset_config
 from tactile_braille.agents.registry import agent_label, agent_names
 from tactile_braille.evaluation.report import (
     PAPER_COLUMNS,
@@ -113,12 +113,23 @@ def is_presets_own(variant: str) -> bool:
 def split_groups(records: list[RunRecord], ablations: list[RunRecord] = ()) -> tuple[Groups, Groups]:
     """(The groups of ``records`` run with a preset's own settings, the others with ``ablations``'s), each
     in the paper's order (:func:`~tactile_braille.evaluation.report.group`). An ablation's runs are never a
-    preset's own row: where their settings are the preset's, their group is named :data:`AS_ABLATION`."""
+    preset's own row: where their settings are the preset's, their group is named :data:`AS_ABLATION`,
+    after their epochs where those are not the preset's (``fast-tactile, fp32, 60 epochs, run as an
+    ablation``): the ablation is then the training's length."""
     own = group([r for r in records if is_presets_own(r.variant)])
     departed = group([r for r in [*records, *ablations] if not is_presets_own(r.variant)])
     for (task, algo, variant), members in group([r for r in ablations if is_presets_own(r.variant)]).items():
-        departed[task, algo, f"{variant}, {AS_ABLATION}"] = members
+        for record in members:
+            named = f"{variant}{_other_epochs(record)}, {AS_ABLATION}"
+            departed.setdefault((task, algo, named), []).append(record)
     return own, dict(sorted(departed.items(), key=lambda item: (_task_index(item[0][0]), *item[0][1:])))
+
+
+def _other_epochs(record: RunRecord) -> str:
+    """``", 60 epochs"`` where a preset's run was set to train other epochs than its preset's, else ``""``."""
+    config = record.config
+    preset = preset_config(config.preset, config.task, config.algo)
+    return "" if config.epochs == preset.epochs else f", {config.epochs} epochs"
 
 
 def merged(own: Groups, departed: Groups) -> Groups:
