@@ -22,7 +22,7 @@ LAYERS = {
     "supervised": 6,
     "agents": 7,
     "evaluation": 8,
-    "sweep": 9, "baselines": 9,
+    "sweep": 9, "baselines": 9, "search": 9, "tuning": 9,
     "cli": 10, "cli_config": 10,
 }  # fmt: skip
 """Each top-level module or subpackage and its layer: a module imports only from its layer and below."""

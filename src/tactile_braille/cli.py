@@ -954,6 +954,80 @@ def _add_sweep_command(commands) -> None:
     sweeper.set_defaults(handler=_sweep)
 
 
+def _machine(args: argparse.Namespace) -> dict:
+    """The machine settings given to ``tune`` (:data:`tactile_braille.tuning.MACHINE`)."""
+    from tactile_braille.cli_config import resolve_precision
+
+    given = {name: getattr(args, name) for name in ("epochs", "device", "threads", "dataset")}
+    machine = {name: value for name, value in given.items() if value is not None}
+    machine["precision"] = resolve_precision(args.precision, args.device or "cpu")
+    return machine
+
+
+def _tune(args: argparse.Namespace) -> int:
+    from tactile_braille import tuning
+
+    if args.action == "search":
+        found = tuning.tune(
+            args.task, args.algo, args.preset, args.trials, args.study, args.seed, _machine(args)
+        )
+        best = found["best"]
+        if best is None:
+            print(f"{found['trials']} trials finished, none complete (all pruned)")
+        else:
+            print(f"{found['trials']} trials; best #{best['number']}: accuracy {best['accuracy']:.3f} in "
+                  f"{best['total_steps']} steps with {best['params']}")  # fmt: skip
+        return 0
+    records = tuning.run_seeds(args.task, args.algo, args.preset, args.study, args.seeds, args.root,
+                               args.into, _machine(args))  # fmt: skip
+    for record in records:
+        print(f"{record}: {_typed(record / 'result.json')}")
+    return 0
+
+
+def _typed(result_file: Path) -> str:
+    import json
+
+    report = json.loads(result_file.read_text())["report"]
+    return f"accuracy {report['accuracy']:.3f} in {report['total_steps']} steps"
+
+
+def _add_tune_command(commands) -> None:
+    """The ``tune`` command: the benchmark's tuning protocol for this project's agents."""
+    tune = commands.add_parser(
+        "tune", help="search an agent's settings on a tuning seed (Optuna), then train them on fresh seeds",
+        description="The benchmark's tuning protocol (docs/benchmark.md): `search` runs an Optuna study of "
+        "the agent's search space from a preset on a tuning seed; `run` trains the best trial's settings on "
+        "fresh seeds and archives their records, each carrying the search.",
+    )  # fmt: skip
+    actions = tune.add_subparsers(dest="action", required=True)
+    for name, text in (("search", "run the search until it holds --trials trials"),
+                       ("run", "train the best trial's settings on --seeds")):  # fmt: skip
+        action = actions.add_parser(name, help=text)
+        action.add_argument("task", help="environment id, e.g. DiscreteArrows-v0")
+        action.add_argument("algo", choices=agent_names())
+        action.add_argument("--preset", choices=TRAINING_PRESETS, required=True, help="the untuned settings")
+        action.add_argument("--study", type=Path, required=True,
+                            help="folder of the search's study (SQLite) and its record (JSON; `run` reads "
+                            "either)")  # fmt: skip
+        action.add_argument(
+            "--epochs", type=int, default=None, help="each run's epochs (default: the preset's)"
+        )
+        action.add_argument("--precision", choices=(*PRECISIONS, "auto"), default="fp32")
+        action.add_argument("--threads", type=int, default=1, help="torch threads per run (default 1)")
+        action.add_argument("--device", default=None, help="torch device (default cpu)")
+        action.add_argument("--dataset", default=None, help="the dataset backend's file (default: cached)")
+        action.set_defaults(handler=_tune)
+    actions.choices["search"].add_argument(
+        "--trials", type=int, required=True, help="trials to finish in all"
+    )
+    actions.choices["search"].add_argument("--seed", type=int, default=100, help="the tuning seed (100)")
+    actions.choices["run"].add_argument("--seeds", type=int, nargs="+", required=True, help="fresh seeds")
+    actions.choices["run"].add_argument("--root", type=Path, default=Path("runs/tuned"),
+                                        help="the runs' folders (default runs/tuned)")  # fmt: skip
+    actions.choices["run"].add_argument("--into", type=Path, required=True, help="folder of the records")
+
+
 def _archive(args: argparse.Namespace) -> int:
     from tactile_braille.sweep import archive_run
 
@@ -1061,6 +1135,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_leaderboard_command(commands)
     _add_archive_command(commands)
     _add_sweep_command(commands)
+    _add_tune_command(commands)
     _add_benchmark_command(commands)
     _add_data_command(commands)
     _add_keycaps_command(commands)
@@ -1095,9 +1170,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.argv = argv
     try:
         return args.handler(args)
-    except (OSError, ValueError, RigError, LockedError) as error:
-        # DatasetError is a ValueError; an OSError is a path, a permission or a full disk: what the user
-        # can fix gets its message, not a traceback.
+    except (OSError, ValueError, RigError, LockedError, ImportError) as error:
+        # DatasetError is a ValueError; an OSError is a path, a permission or a full disk; an ImportError
+        # an optional library not installed: what the user can fix gets its message, not a traceback.
         print(f"tactile-braille: error: {error}", file=sys.stderr)
         return 2
 

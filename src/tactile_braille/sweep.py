@@ -153,6 +153,7 @@ RECORD_FILES = (
     "progress.csv",
     "typing.json",
     "result.json",
+    "tuning.json",
     "touch.json",
     "transfer.json",
     "init.json",

@@ -33,9 +33,8 @@ import math
 import types
 import typing
 from dataclasses import dataclass, field
-from typing import Any, Literal, Union
+from typing import Any, ClassVar, Literal, Union
 
-# The world's value sets and rules are the environments' (torch-free).
 from tactile_braille.envs.world import (
     BACKENDS,  # noqa: F401 - re-exported for the command line
     Backend,
@@ -45,6 +44,8 @@ from tactile_braille.envs.world import (
     check_frame_noise,
     check_world,
 )
+
+# The world's value sets and rules are the environments' (torch-free).
 
 Precision = Literal["fp32", "bf16"]
 RelabelRule = Literal["paper", "all"]
@@ -108,6 +109,23 @@ def _check_hyperparameters(config: AgentConfig) -> None:
         raise ValueError(f"{type(config).__name__}: " + "; ".join(problems))
 
 
+Choice = tuple
+"""A categorical dimension of a search space: its values."""
+
+
+@dataclass(frozen=True)
+class Range:
+    """A numeric dimension of a search space: ``low`` to ``high``, on a log scale with ``log``."""
+
+    low: float
+    high: float
+    log: bool = False
+
+
+Space = dict[str, "Range | Choice"]
+"""A search space: each setting's name and the values a trial may give it."""
+
+
 @dataclass(frozen=True)
 class AgentConfig:
     """Base of every agent's hyperparameters (:class:`~tactile_braille.agents.registry.AgentSpec`'s
@@ -120,6 +138,11 @@ class AgentConfig:
     says so in :meth:`check_run`; one whose settings use what only a calibrated robot knows lists
     them in :meth:`proprio_settings`.
     """
+
+    search_space: ClassVar[Space] = {}
+    """The hyperparameters the benchmark's search may change (:mod:`tactile_braille.search`): each
+    field's name with a :class:`~tactile_braille.search.Range` or a ``Choice`` of its values. Empty:
+    the agent has no search (``tactile-braille tune`` refuses it)."""
 
     def __post_init__(self) -> None:
         _check_hyperparameters(self)
@@ -561,6 +584,16 @@ class PlannerConfig(AgentConfig):
             that: the world's moves are deterministic where the sensor stands, so a move that did not
             reach a key is not a draw to be made again. False: every move is the graph's draw.
     """
+
+    search_space: ClassVar[Space] = {
+        "gamma": Choice((0.8, 0.85, 0.9, 0.95)),
+        "learning_rate": Range(3e-4, 3e-3, log=True),
+        "epsilon_decay_steps": Choice((500, 1000, 2000)),
+        "refit_every": Choice((25, 50, 100)),
+        "sharpen": Choice((2.0, 4.0, 8.0)),
+        "accept": Choice((0.8, 0.9, 0.95)),
+        "repeat_penalty": Choice((0.0, 0.05, 0.1, 0.2)),
+    }
 
     gamma: float = 0.9
     learning_rate: float = 1e-3

@@ -14,6 +14,7 @@ a config with ``init_from`` starts a new run from another run's agent (a warm st
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -57,8 +58,12 @@ def train(
     resume: bool = False,
     progress: bool = True,
     rig=None,
+    after_epoch: Callable[[int, Any], None] | None = None,
 ) -> Path:
     """Train (or, with ``resume``, continue) a run; returns its folder. ``rig``: see :func:`make_env`.
+    ``after_epoch(env_steps, agent)``: called after each epoch is logged and checkpointed, with the
+    environment steps trained so far and the agent (a search types with it to prune; an exception it
+    raises stops the run there; it resumes from its last checkpoint).
 
     A resume continues from the last checkpoint with the stored settings; a ``config`` given with it
     may change only :data:`~tactile_braille.agents.run.MACHINE_SETTINGS` (``epochs`` extends the run).
@@ -77,10 +82,10 @@ def train(
     with exclusive_lock(run_dir / LOCK_FILE, f"the run {run_dir}"):
         config = open_run(config, run_dir, resume, rig)
         check_device(config.device)  # a resume's stored device
-        return _train(config, run_dir, resume, progress, rig)
+        return _train(config, run_dir, resume, progress, rig, after_epoch)
 
 
-def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig) -> Path:
+def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig, after_epoch) -> Path:
     """The loop of :func:`train`, in the run's folder, its lock held."""
     torch.set_num_threads(config.threads)
     env, test_env = make_env(config, rig), make_env(config, rig)
@@ -132,6 +137,8 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, progress: bool, rig
             if (epoch + 1) % config.checkpoint_every == 0 or epoch + 1 == config.epochs:
                 counters.episode, counters.losses = episodes.state(), losses
                 save_checkpoint(run_dir, agent, buffer, rng, counters)
+            if after_epoch is not None:
+                after_epoch(counters.env_steps, agent)
     return run_dir
 
 

@@ -39,16 +39,23 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
-import numpy as np
 
 from tactile_braille._io import atomic_path
 from tactile_braille._tasks import REGISTERED_TASKS, RegisteredTask, registered_task
-from tactile_braille.evaluation.leaderboard import typing_score
 from tactile_braille.evaluation.results import make_result, write_result
 from tactile_braille.evaluation.scoring import TypingReport, evaluate_policy
+from tactile_braille.search import (
+    TUNING_SEEDS,
+    Choice,
+    Range,
+    check_points,
+    check_reported_seeds,
+    check_tuning_seed,
+    finished_search,
+    json_value,
+    search,
+)
 
-TUNING_SEEDS = tuple(range(100, 200))
-"""Seeds a search may train on; results are reported on others."""
 DEFAULTS: dict[str, dict] = {
     "dqn": {"learning_rate": 1e-4, "gamma": 0.99, "batch_size": 32, "train_freq": 1, "gradient_steps": 1,
             "learning_starts": 1_000, "target_update_interval": 500, "exploration_fraction": 0.3,
@@ -97,19 +104,6 @@ ALGORITHMS: dict[str, Algorithm] = {
     "tqc": Algorithm(*_CONTRIB, "TQC", "continuous", "SB3-Contrib TQC + HER"),
 }
 """The algorithms the module runs, by the name the command line takes."""
-
-Choice = tuple
-"""A categorical dimension of a search space: its values."""
-
-
-@dataclass(frozen=True)
-class Range:
-    """A numeric dimension of a search space: ``low`` to ``high``, on a log scale with ``log``."""
-
-    low: float
-    high: float
-    log: bool = False
-
 
 _HER = {
     "goal_selection_strategy": Choice(("future", "final", "episode")),
@@ -215,7 +209,7 @@ def train(task: str, algo: str, settings: dict, steps: int, seed: int, dataset=N
 
     torch.set_num_threads(1)
     run = {"task": task, "algo": algo, "settings": settings, "steps": steps, "seed": seed}
-    run = json.loads(json.dumps(run, default=_plain))  # as its claim on a checkpoint folder reads back
+    run = json.loads(json.dumps(run, default=json_value))  # as its claim on a checkpoint folder reads back
     resumed = _resume(checkpoints, run, dataset, device) if checkpoints is not None else None
     model, done, seconds_before = resumed or (make_model(task, algo, settings, steps, seed, dataset, device),
                                               0, 0.0)  # fmt: skip
@@ -281,163 +275,41 @@ def _resume(folder: Path, run: dict, dataset, device: str):
     return model, progress["steps"], progress["seconds"]
 
 
-def objective(report: TypingReport) -> float:
-    """What a search maximises: the leaderboard's per-seed :func:`typing_score` (accuracy, then fewer
-    steps)."""
-    return typing_score(report.accuracy, report.total_steps, report.keys_asked)
+def _identity(task: str, algo: str) -> dict:
+    return {"library": ALGORITHMS[algo].package, "algo": algo, "task": task}
 
 
-# ------------------------------------------------------------------ the search
-def _study(path: Path, task: str, algo: str, create: bool):
-    """The search's study in the SQLite file ``path``: its trials send a heartbeat, so that a trial
-    whose process was killed is failed (and not counted) when any process next searches."""
-    import optuna
-
-    if not create and not path.exists():
-        raise FileNotFoundError(f"no study at {path}: run `tune` first")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    storage = optuna.storages.RDBStorage(f"sqlite:///{path}", heartbeat_interval=30, grace_period=120)
-    return optuna.create_study(
-        study_name=f"{task}__{algo}", storage=storage, direction="maximize", load_if_exists=True,
-        sampler=optuna.samplers.TPESampler(), pruner=optuna.pruners.MedianPruner(n_startup_trials=4),
-    )  # fmt: skip
-
-
-FINISHED = ("COMPLETE", "PRUNED")
-"""The trial states a search counts (a failed trial, its process killed, is run again)."""
-
-
-def _finished(study) -> list:
-    return [t for t in study.trials if t.state.name in FINISHED]
-
-
-def _suggest(trial, space: dict[str, Range | Choice]) -> dict:
-    return {name: trial.suggest_float(name, dim.low, dim.high, log=dim.log) if isinstance(dim, Range)
-            else trial.suggest_categorical(name, list(dim)) for name, dim in space.items()}  # fmt: skip
+def _untuned(algo: str) -> dict:
+    return {name: DEFAULTS[algo][name] for name in SEARCH_SPACES[algo]}
 
 
 def tune(task: str, algo: str, trials: int, study_dir: Path, seed: int = TUNING_SEEDS[0], steps=None,
          dataset=None, device: str = "cpu") -> dict:  # fmt: skip
-    """Run the search until the study holds ``trials`` finished or pruned trials, counting those other
-    processes are running (the module docstring); returns :func:`summary`, also written beside the
-    study. A study searches with one seed and one budget: another is refused. ``device``: where the
-    networks train (the budget and the search are the same on any)."""
-    import optuna
-
+    """Run the search (:func:`tactile_braille.search.search`) until the study ``TASK__ALGO.db`` in
+    ``study_dir`` holds ``trials`` finished or pruned trials; returns its record, also written beside
+    the study. Each trial trains for ``steps`` (the official budget unless told) on ``device``."""
     check_algo(task, algo)
-    if seed not in TUNING_SEEDS:
-        raise ValueError(
-            f"a search trains on tuning seeds ({TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]}), got {seed}"
-        )
+    check_tuning_seed(seed)
     steps = steps or official_budget(task)
-    path = Path(study_dir) / f"{task}__{algo}.db"
-    study = _study(path, task, algo, create=True)
-    for name, value in (("seed", seed), ("steps", steps)):
-        recorded = study.user_attrs.get(name)
-        if recorded is None:
-            study.set_user_attr(name, value)
-        elif recorded != value:
-            raise ValueError(f"{path} searches with {name} {recorded}, not {value}: one study, one protocol")
-    defaults = {name: DEFAULTS[algo][name] for name in SEARCH_SPACES[algo]}
-    queued = [t.params or t.system_attrs.get("fixed_params") for t in study.trials if t.state.name != "FAIL"]
-    if defaults not in queued:  # the untuned settings are always among the trials
-        study.enqueue_trial(defaults)
-    checks = (steps // 3, 2 * steps // 3)
 
-    def run_trial(trial) -> float:
-        settings = _suggest(trial, SEARCH_SPACES[algo])
-        trial.set_user_attr("seed", seed)
-        trial.set_user_attr("steps", steps)
+    def train_and_score(settings: dict, check) -> tuple[TypingReport, float]:
+        model, seconds = train(task, algo, settings, steps, seed, dataset, check_points(steps), check, device)
+        return score(model, task, dataset), seconds / 60
 
-        def check(done: int, report: TypingReport) -> None:
-            trial.report(objective(report), done)
-            if trial.should_prune():
-                raise optuna.TrialPruned()
-
-        model, seconds = train(task, algo, settings, steps, seed, dataset, checks, check, device)
-        report = score(model, task, dataset)
-        trial.set_user_attr("accuracy", report.accuracy)
-        trial.set_user_attr("total_steps", report.total_steps)
-        trial.set_user_attr("minutes", round(seconds / 60, 2))
-        return objective(report)
-
-    while True:
-        optuna.storages.fail_stale_trials(study)  # a killed process's trial is run again
-        if len(_finished(study)) + sum(t.state.name == "RUNNING" for t in study.trials) >= trials:
-            break
-        study.optimize(run_trial, n_trials=1)
-        _write_summary(path, summary(study, task, algo))
-    result = summary(study, task, algo)
-    _write_summary(path, result)
-    return result
-
-
-def summary(study, task: str, algo: str) -> dict:
-    """The search as a results file records it: space, budget, tuning seed, its finished trials (the
-    count, and each), the best."""
-    finished = _finished(study)
-    complete = [t for t in finished if t.state.name == "COMPLETE"]
-    best = max(complete, key=lambda t: t.value) if complete else None
-    space = {name: {"range": [dim.low, dim.high], "log": dim.log} if isinstance(dim, Range)
-             else {"choice": list(dim)} for name, dim in SEARCH_SPACES[algo].items()}  # fmt: skip
-    return {
-        "library": ALGORITHMS[algo].package,
-        "algo": algo,
-        "task": task,
-        "search": "optuna TPE, median pruning",
-        "space": space,
-        "defaults": DEFAULTS[algo],
-        "objective": "typing accuracy, then fewer steps",
-        "seed": study.user_attrs.get("seed"),
-        "steps": study.user_attrs.get("steps"),
-        "trials": len(finished),
-        "trial_log": [
-            {"number": t.number, "state": t.state.name, "params": t.params, "value": t.value, **t.user_attrs}
-            for t in finished
-        ],
-        "best": None if best is None else {"number": best.number, "params": best.params, **best.user_attrs},
-    }
-
-
-def _write_summary(study_path: Path, content: dict) -> None:
-    with atomic_path(study_path.with_suffix(".json")) as temporary:
-        temporary.write_text(json.dumps(content, indent=2, default=_plain) + "\n")
+    return search(Path(study_dir) / f"{task}__{algo}.db", _identity(task, algo), SEARCH_SPACES[algo],
+                  DEFAULTS[algo], trials, seed, steps, train_and_score)  # fmt: skip
 
 
 def _where(device: str) -> str:
     return "one CPU thread" if device == "cpu" else f"{device} and one CPU thread"
 
 
-def _plain(value):
-    return value.item() if isinstance(value, np.generic) else str(value)
-
-
 # ------------------------------------------------------------------ final runs
 def search_record(study_dir: Path, task: str, algo: str) -> dict:
-    """The finished search of ``algo`` on ``task`` (:func:`summary`): from its study in ``study_dir``,
-    whose trials must all have finished, or else from the record written beside it (``TASK__ALGO.json``),
-    which may travel without the study."""
-    import optuna
-
-    path = Path(study_dir) / f"{task}__{algo}.db"
-    record = path.with_suffix(".json")
-    if path.exists():
-        study = _study(path, task, algo, create=False)
-        optuna.storages.fail_stale_trials(study)  # trials whose process stopped sending its heartbeat
-        going = [t.number for t in study.trials if t.state.name in ("RUNNING", "WAITING")]
-        if going:
-            raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
-        tuning, source = summary(study, task, algo), path
-    elif record.exists():
-        tuning, source = json.loads(record.read_text()), record
-        found = (tuning.get("task"), tuning.get("algo"))
-        if found != (task, algo) or not {"best", "steps", "trials"} <= tuning.keys():
-            raise ValueError(f"{record} is no record of a search of {algo} on {task} (it names {found})")
-    else:
-        raise FileNotFoundError(f"no study at {path} and no record of one at {record}: run `tune` first")
-    if tuning["best"] is None:
-        raise ValueError(f"{source} holds no finished trial yet")
-    return tuning
+    """The finished search of ``algo`` on ``task`` (:func:`tactile_braille.search.finished_search`): from
+    its study in ``study_dir``, or else from the record written beside it (``TASK__ALGO.json``)."""
+    study = Path(study_dir) / f"{task}__{algo}.db"
+    return finished_search(study, _identity(task, algo), SEARCH_SPACES[algo], DEFAULTS[algo])
 
 
 def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=None, device: str = "cpu",
@@ -451,9 +323,7 @@ def run_seeds(task: str, algo: str, study_dir: Path, seeds, into: Path, dataset=
     there is none (on another machine), from the record ``tune`` writes beside it."""
     from tactile_braille._io import LockedError, exclusive_lock
 
-    clash = sorted(set(seeds) & set(TUNING_SEEDS))
-    if clash:
-        raise ValueError(f"seeds {clash} are tuning seeds: report on others")
+    check_reported_seeds(seeds)
     steps = steps or official_budget(task)
     tuning = search_record(study_dir, task, algo)
     Path(into).mkdir(parents=True, exist_ok=True)

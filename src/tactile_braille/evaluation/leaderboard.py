@@ -79,9 +79,9 @@ class Row:
     optimum: float | None = None
     paper: bool = False
     tuning: str = "-"
-    """How the method's settings were chosen: a library baseline's search (``12 trials``, or ``12 trials
-    of 7,500 steps`` where its trials trained for fewer steps than the row) as its results files record
-    it, else ``-`` (our presets' tuning: docs/notes/results-account.md)."""
+    """How the method's settings were chosen: the search its results files record (``12 trials``, or
+    ``12 trials of 7,500 steps`` where its trials trained for fewer steps than the row), else ``-`` (no
+    search: published settings, or a preset chosen by hand; docs/benchmark.md)."""
     scores: list[float] = field(default_factory=list)
     """Each seed's :func:`typing_score` (the statistics' measure)."""
 
@@ -321,8 +321,12 @@ _INTRO = (
     "its training seeds (range in brackets), typing the paper's sequences under the paper's protocol "
     "(no reset between keys), ranked by accuracy, then by steps. *Touch-only optimum*: the fewest steps "
     "a policy that knows only what it has felt can expect to type every key right in (discrete tasks; a "
-    "lower bound under this protocol; a policy that presses wrong keys early can take fewer). The "
-    "libraries' baselines and their budgets: [benchmark.md](benchmark.md#baselines-from-other-libraries). "
+    "lower bound under this protocol; a policy that presses wrong keys early can take fewer). *Tuning*: "
+    "the trials of the search that chose the row's settings (the benchmark's protocol: "
+    "[benchmark.md](benchmark.md#the-tuning-protocol)); `-` where no search did: the paper's and the "
+    "released code's settings as published, and our other presets' settings, chosen by hand on tuning "
+    "seeds. The libraries' baselines and their budgets: "
+    "[benchmark.md](benchmark.md#baselines-from-other-libraries). "
     "The paper's rows are its reported figures: its exact conditions cannot be fingerprinted, "
     "its steps were most likely counted with a reset per key (docs/evaluation.md), and on the continuous "
     "tasks it was measured in the released simulator's world, where the workspace's edge does not stop "

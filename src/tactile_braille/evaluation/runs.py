@@ -7,7 +7,8 @@ other agent goes through) under both protocols and writes
 benchmark's results file) and ``RUN_DIR/typing_confusion.png``;
 ``evaluate_transfer(RUN_DIR, worlds)`` types in other worlds (the live
 renderer, a calibration error, another sensor: :mod:`.worlds`) and writes
-``RUN_DIR/transfer.json``.
+``RUN_DIR/transfer.json``. A run whose settings a search chose holds that search's record as
+``RUN_DIR/tuning.json`` (:mod:`tactile_braille.tuning`), and its results file carries it.
 :func:`run_result` reads a run's results file, or makes it from a record
 archived before results files existed.
 """
@@ -37,17 +38,27 @@ from tactile_braille.evaluation.scoring import (
 
 RESULT_FILE = "result.json"
 TRANSFER_FILE = "transfer.json"
+TUNING_FILE = "tuning.json"
 LEGACY_VERSION = "0.1.0"
 """The project's version when typing.json held no fingerprint (every record before results files)."""
 
 
-def run_method(config) -> str:
+def run_method(config, tuned: bool = False) -> str:
     """A run's method name on a leaderboard: algorithm, HER, preset, and each setting in which the run
-    departs from its preset (``name=value``): a preset's name alone would claim the preset's agent."""
+    departs from its preset (``name=value``): a preset's name alone would claim the preset's agent.
+    ``tuned``: a search chose those settings (``..., tuned: name=value``)."""
     her = " + HER" if config.replay.her and agent_spec(config.algo).hindsight else ""
-    settings = "".join(f", {change}" for change in departures(config))
+    settings = ", ".join(departures(config))
+    if tuned:
+        settings = "tuned" + (f": {settings}" if settings else "")
     algo = agent_label(config.algo)
-    return f"tactile_braille {algo}{her} (`{config.preset or 'custom'}`{settings})"
+    return f"tactile_braille {algo}{her} (`{config.preset or 'custom'}`{', ' if settings else ''}{settings})"
+
+
+def run_tuning(run_dir) -> dict | None:
+    """The record of the search that chose a run's settings (``RUN_DIR/tuning.json``), or None."""
+    path = Path(run_dir) / TUNING_FILE
+    return json.loads(path.read_text()) if path.exists() else None
 
 
 def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
@@ -72,8 +83,9 @@ def evaluate_typing(run_dir, sentences: bool = True, seed: int = 0) -> dict:
     if report.sentences is not None:
         output["sentences"] = report.sentences
     # The results file is made (and checked) before anything is written.
-    result = make_result(report, method=run_method(config), seed=config.seed, epochs=epoch + 1,
-                         env_steps=env_steps)  # fmt: skip
+    tuning = run_tuning(run_dir)
+    result = make_result(report, method=run_method(config, tuned=tuning is not None), seed=config.seed,
+                         epochs=epoch + 1, env_steps=env_steps, tuning=tuning)  # fmt: skip
     confusion = np.array(report.confusion["counts"])
     save_typing_confusion(confusion, report.confusion["rows"], report.confusion["columns"],
                           run_dir / "typing_confusion.png",

@@ -1,0 +1,274 @@
+"""The benchmark's tuning protocol, for any method (docs/benchmark.md#the-tuning-protocol).
+
+1. **Search** (:func:`search`): an Optuna study (TPE sampler; median pruning on the typing score at a
+   third and two thirds of a trial's budget) over a stated search space, each trial trained on one
+   tuning seed (100 unless told; seeds 100-199 are never reported) and scored by typing accuracy,
+   then by fewer steps, under the paper's protocol. The untuned settings are always among the
+   trials. The study lives in a SQLite file whose trials send a heartbeat, so a killed search
+   resumes where it stopped (its unfinished trial is failed and run again), and two processes can
+   search one study side by side. After each trial the search's record (:func:`summary`) is
+   written beside the study as JSON.
+2. **Final runs**: the best trial's settings on fresh seeds; each results file records the search
+   under ``tuning`` (:func:`finished_search` reads it back from the study, or from the record alone
+   on a machine without the study).
+
+A method plugs in with the function that trains and scores one trial: Stable-Baselines3's agents in
+:mod:`tactile_braille.baselines.sb3`, this project's in :mod:`tactile_braille.tuning`. Optuna
+is imported only when a search runs (``pip install tactile_braille[tune]``). A search space's parts,
+:class:`Range` and ``Choice``, are defined with the settings (:mod:`tactile_braille.agents.config`),
+whose classes name their agent's space.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tactile_braille._io import atomic_path
+from tactile_braille.agents.config import Choice as Choice  # a space's parts live with the settings
+from tactile_braille.agents.config import Range, Space
+
+if TYPE_CHECKING:
+    from tactile_braille.evaluation.scoring import TypingReport
+
+TUNING_SEEDS = tuple(range(100, 200))
+"""Seeds a search may train on; results are reported on others."""
+
+FINISHED = ("COMPLETE", "PRUNED")
+"""The trial states a search counts (a failed trial, its process killed, is run again)."""
+
+Check = Callable[[int, "TypingReport"], None]
+"""Called by a trial with its training steps so far and a typing report at each of its checks; raises
+``optuna.TrialPruned`` where the trial should stop."""
+
+
+def objective(report: TypingReport) -> float:
+    """What a search maximises: the leaderboard's per-seed :func:`typing_score` (accuracy, then fewer
+    steps)."""
+    from tactile_braille.evaluation.leaderboard import typing_score
+
+    return typing_score(report.accuracy, report.total_steps, report.keys_asked)
+
+
+def check_tuning_seed(seed: int) -> None:
+    """Refuse a search seed that is not a tuning seed."""
+    if seed not in TUNING_SEEDS:
+        raise ValueError(
+            f"a search trains on tuning seeds ({TUNING_SEEDS[0]}-{TUNING_SEEDS[-1]}), got {seed}"
+        )
+
+
+def check_reported_seeds(seeds) -> None:
+    """Refuse final-run seeds among the tuning seeds."""
+    clash = sorted(set(seeds) & set(TUNING_SEEDS))
+    if clash:
+        raise ValueError(f"seeds {clash} are tuning seeds: report on others")
+
+
+def check_points(steps: int) -> tuple[int, int]:
+    """The training steps after which a trial of ``steps`` reports its typing (pruning's checks)."""
+    return steps // 3, 2 * steps // 3
+
+
+def check_untuned(space: Space, untuned: dict[str, Any]) -> None:
+    """Refuse untuned settings that the search space cannot hold (a search always tries them)."""
+    problems = [f"{name}: none given" for name in space if name not in untuned]
+    for name, dim in space.items():
+        value = untuned.get(name)
+        if name not in untuned:
+            continue
+        if isinstance(dim, Range) and not (isinstance(value, int | float) and dim.low <= value <= dim.high):
+            problems.append(f"{name}: {value!r} is outside [{dim.low}, {dim.high}]")
+        elif not isinstance(dim, Range) and value not in dim:
+            problems.append(f"{name}: {value!r} is none of {list(dim)}")
+    if problems:
+        raise ValueError("the untuned settings are not in the search space (" + "; ".join(problems) + ")")
+
+
+def space_record(space: Space) -> dict:
+    """A search space as its record writes it."""
+    return {name: {"range": [dim.low, dim.high], "log": dim.log} if isinstance(dim, Range)
+            else {"choice": list(dim)} for name, dim in space.items()}  # fmt: skip
+
+
+def open_study(path: Path, name: str, create: bool):
+    """The study ``name`` in the SQLite file ``path``: its trials send a heartbeat, so that a trial whose
+    process was killed is failed (and not counted) when any process next searches."""
+    optuna = _optuna()
+    if not create and not Path(path).exists():
+        raise FileNotFoundError(f"no study at {path}: run the search first")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with warnings.catch_warnings():  # Optuna marks the heartbeat experimental
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        storage = optuna.storages.RDBStorage(f"sqlite:///{path}", heartbeat_interval=30, grace_period=120)
+    return optuna.create_study(
+        study_name=name, storage=storage, direction="maximize", load_if_exists=True,
+        sampler=optuna.samplers.TPESampler(), pruner=optuna.pruners.MedianPruner(n_startup_trials=4),
+    )  # fmt: skip
+
+
+def _optuna():
+    try:
+        import optuna
+    except ImportError as error:
+        raise ImportError(
+            "a search needs Optuna: pip install 'tactile_braille[tune]' (or optuna>=4.0)"
+        ) from error
+    return optuna
+
+
+def _fail_stale(study) -> None:
+    """Fail the trials whose process stopped sending its heartbeat (Optuna marks the call experimental)."""
+    optuna = _optuna()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        optuna.storages.fail_stale_trials(study)
+
+
+def _finished(study) -> list:
+    return [t for t in study.trials if t.state.name in FINISHED]
+
+
+def _suggest(trial, space: Space) -> dict:
+    return {name: trial.suggest_float(name, dim.low, dim.high, log=dim.log) if isinstance(dim, Range)
+            else trial.suggest_categorical(name, list(dim)) for name, dim in space.items()}  # fmt: skip
+
+
+def search(
+    study_path: Path,
+    identity: dict[str, Any],
+    space: Space,
+    untuned: dict[str, Any],
+    trials: int,
+    seed: int,
+    steps: int,
+    train_and_score: Callable[[dict, Check], tuple[TypingReport, float]],
+) -> dict:
+    """Run the search until the study at ``study_path`` holds ``trials`` finished or pruned trials,
+    counting those other processes are running (the module docstring); returns :func:`summary`, also
+    written beside the study.
+
+    Args:
+        study_path: the study's SQLite file (``.db``); the record goes beside it (``.json``).
+        identity: what is searched (``task``, ``algo`` and what else names the method), at the head of
+            the record. The study's name is the file's (``TASK__ALGO.db``: ``TASK__ALGO``).
+        space: the search space; ``untuned``: the settings before any search (a value for each of the
+            space's names), always among the trials.
+        trials: trials to finish in all.
+        seed: the tuning seed every trial trains on; ``steps``: each trial's training steps. A study
+            searches with one seed and one budget: another is refused.
+        train_and_score: trains one trial with ``settings`` (the space's names) and returns its typing
+            report and minutes of training; it calls ``check(steps_done, report)`` at
+            :func:`check_points` where it can (pruning).
+    """
+    optuna = _optuna()
+    check_tuning_seed(seed)
+    check_untuned(space, untuned)
+    study = open_study(study_path, Path(study_path).stem, create=True)
+    for name, value in (("seed", seed), ("steps", steps)):
+        recorded = study.user_attrs.get(name)
+        if recorded is None:
+            study.set_user_attr(name, value)
+        elif recorded != value:
+            raise ValueError(
+                f"{study_path} searches with {name} {recorded}, not {value}: one study, one protocol"
+            )
+    first = {name: untuned[name] for name in space}
+    queued = [t.params or t.system_attrs.get("fixed_params") for t in study.trials if t.state.name != "FAIL"]
+    if first not in queued:  # the untuned settings are always among the trials
+        study.enqueue_trial(first)
+
+    def run_trial(trial) -> float:
+        settings = _suggest(trial, space)
+        trial.set_user_attr("seed", seed)
+        trial.set_user_attr("steps", steps)
+
+        def check(done: int, report: TypingReport) -> None:
+            trial.report(objective(report), done)
+            if trial.should_prune():
+                raise optuna.TrialPruned()
+
+        report, minutes = train_and_score(settings, check)
+        trial.set_user_attr("accuracy", report.accuracy)
+        trial.set_user_attr("total_steps", report.total_steps)
+        trial.set_user_attr("minutes", round(minutes, 2))
+        return objective(report)
+
+    while True:
+        _fail_stale(study)  # a killed process's trial is run again
+        if len(_finished(study)) + sum(t.state.name == "RUNNING" for t in study.trials) >= trials:
+            break
+        study.optimize(run_trial, n_trials=1)
+        _write_record(study_path, summary(study, identity, space, untuned))
+    result = summary(study, identity, space, untuned)
+    _write_record(study_path, result)
+    return result
+
+
+def summary(study, identity: dict[str, Any], space: Space, untuned: dict[str, Any]) -> dict:
+    """The search as a results file records it: what was searched, the space, the untuned settings,
+    the budget, the tuning seed, its finished trials (the count, and each), the best."""
+    finished = _finished(study)
+    complete = [t for t in finished if t.state.name == "COMPLETE"]
+    best = max(complete, key=lambda t: t.value) if complete else None
+    return {
+        **identity,
+        "search": "optuna TPE, median pruning",
+        "space": space_record(space),
+        "defaults": untuned,
+        "objective": "typing accuracy, then fewer steps",
+        "seed": study.user_attrs.get("seed"),
+        "steps": study.user_attrs.get("steps"),
+        "trials": len(finished),
+        "trial_log": [
+            {"number": t.number, "state": t.state.name, "params": t.params, "value": t.value, **t.user_attrs}
+            for t in finished
+        ],
+        "best": None if best is None else {"number": best.number, "params": best.params, **best.user_attrs},
+    }
+
+
+def _write_record(study_path: Path, content: dict) -> None:
+    with atomic_path(Path(study_path).with_suffix(".json")) as temporary:
+        temporary.write_text(json.dumps(content, indent=2, default=json_value) + "\n")
+
+
+def json_value(value):
+    """A value JSON does not take (a numpy scalar: its Python value; anything else: its text)."""
+    return value.item() if isinstance(value, np.generic) else str(value)
+
+
+def _described(identity: dict[str, Any]) -> str:
+    preset = f" from the `{identity['preset']}` preset" if identity.get("preset") else ""
+    return f"{identity.get('algo')}{preset} on {identity.get('task')}"
+
+
+def finished_search(study_path: Path, identity: dict[str, Any], space: Space, untuned: dict) -> dict:
+    """A finished search (:func:`summary`): from its study at ``study_path``, whose trials must all have
+    finished, or else from the record written beside it (the ``.json``), which may travel without the
+    study. A record of another search (its ``identity`` differs) is refused, as is a search with no
+    complete trial."""
+    path, record = Path(study_path), Path(study_path).with_suffix(".json")
+    if path.exists():
+        study = open_study(path, path.stem, create=False)
+        _fail_stale(study)  # trials whose process stopped sending its heartbeat
+        going = [t.number for t in study.trials if t.state.name in ("RUNNING", "WAITING")]
+        if going:
+            raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
+        tuning, source = summary(study, identity, space, untuned), path
+    elif record.exists():
+        tuning, source = json.loads(record.read_text()), record
+        found = {name: tuning.get(name) for name in identity}
+        if found != identity or not {"best", "steps", "trials"} <= tuning.keys():
+            searched = _described(identity)
+            raise ValueError(f"{record} is no record of a search of {searched} (it names {found})")
+    else:
+        raise FileNotFoundError(f"no study at {path} and no record of one at {record}: run the search first")
+    if tuning["best"] is None:
+        raise ValueError(f"{source} holds no finished trial yet")
+    return tuning

@@ -1,0 +1,101 @@
+"""Our agents tuned by the benchmark's protocol, run for real on a tiny budget: an Optuna search of the
+planner's settings on a tuning seed that goes on from its study, pruning's typing checks from inside the
+training loop, then final runs on fresh seeds whose records carry the search."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tactile_braille import tuning
+from tactile_braille.agents.config import TrainConfig
+from tactile_braille.agents.presets import preset_config
+from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
+from tactile_braille.evaluation.results import read_result
+from tactile_braille.evaluation.runs import run_method
+from tactile_braille.search import Choice, Range, check_untuned
+
+ARROWS = "tactile_braille/DiscreteArrows-v0"
+
+
+@pytest.mark.slow
+def test_a_search_of_the_planner_goes_on_and_its_final_runs_carry_it(env_datasets, tmp_path, monkeypatch):
+    machine = {"epochs": 3, "dataset": str(env_datasets[ARROWS]), "precision": "fp32", "threads": 1}
+    study, checks = tmp_path / "study", []
+    from tactile_braille import search
+
+    objective = search.objective
+
+    def noted(report):  # every typing the search scores: two checks, then the trial's end
+        checks.append(report.total_steps)
+        return objective(report)
+
+    monkeypatch.setattr(search, "objective", noted)
+    first = tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 1, study, machine=machine)
+    assert first["trials"] == 1 and len(checks) == 3  # at a third, two thirds and the end of 750 steps
+    untuned = tuning.untuned("DiscreteArrows-v0", "planner", "fast-tactile")
+    assert first["trial_log"][0]["params"] == untuned == first["defaults"]  # the preset's settings first
+    assert first["steps"] == 750 and first["seed"] == 100 and first["preset"] == "fast-tactile"
+    again = tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 2, study, machine=machine)
+    assert [t["number"] for t in again["trial_log"]] == [0, 1]  # went on from the study: one more trial
+    assert not list((study / "trials").iterdir())  # each trial's run folder went once it was scored
+    with pytest.raises(ValueError, match="searches with steps 750, not 500: one study, one protocol"):
+        tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 3, study,
+                    machine={**machine, "epochs": 2})  # fmt: skip
+
+    (record,) = tuning.run_seeds("DiscreteArrows-v0", "planner", "fast-tactile", study, [7],
+                                 tmp_path / "runs", tmp_path / "records", machine)  # fmt: skip
+    result = read_result(record / "result.json")
+    best = again["best"]["params"]
+    assert result["tuning"] == json.loads(json.dumps(again)) and result["seed"] == 7
+    config = TrainConfig.from_json(json.loads((record / "config.json").read_text()))
+    assert {name: getattr(config.agent, name) for name in best} == best  # the best trial's settings ran
+    assert result["method"] == run_method(config, tuned=True)
+    assert result["method"].startswith("tactile_braille planner (`fast-tactile`, tuned")
+    assert "| 2 trials |" in leaderboard_markdown(load_results([record]))
+    again_records = tuning.run_seeds("DiscreteArrows-v0", "planner", "fast-tactile", study, [7],
+                                     tmp_path / "runs", tmp_path / "records", machine)  # fmt: skip
+    assert again_records == [record] and read_result(record / "result.json") == result  # not run again
+
+
+def test_a_search_is_refused_before_any_study_is_made(tmp_path):
+    with pytest.raises(ValueError, match="a search trains on tuning seeds"):
+        tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 1, tmp_path, seed=0)
+    with pytest.raises(ValueError, match=r"dqn has no search space \(DQNConfig.search_space is empty\)"):
+        tuning.tune("DiscreteArrows-v0", "dqn", "paper", 1, tmp_path)
+    with pytest.raises(ValueError, match=r"\['replay'\] are not machine settings"):
+        tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 1, tmp_path, machine={"replay": {}})
+    with pytest.raises(ValueError, match=r"seeds \[100\] are tuning seeds"):
+        tuning.run_seeds("DiscreteArrows-v0", "planner", "fast-tactile", tmp_path, [0, 100], tmp_path / "r",
+                         tmp_path / "out")  # fmt: skip
+    with pytest.raises(FileNotFoundError, match=r"no study at .* and no record of one at"):
+        tuning.run_seeds("DiscreteArrows-v0", "planner", "fast-tactile", tmp_path, [0], tmp_path / "r",
+                         tmp_path / "out")  # fmt: skip
+    record = tmp_path / "DiscreteArrows-v0__planner__fast-tactile.json"
+    record.write_text(json.dumps({"library": "tactile_braille", "algo": "planner", "preset": "paper",
+                                  "task": "DiscreteArrows-v0"}))  # fmt: skip
+    with pytest.raises(ValueError, match="no record of a search of planner from the `fast-tactile` preset"):
+        tuning.search_record(tmp_path, "DiscreteArrows-v0", "planner", "fast-tactile")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [record.name]
+
+
+def test_the_untuned_settings_must_lie_in_the_space():
+    space = {"gamma": Choice((0.9, 0.95)), "learning_rate": Range(1e-4, 1e-3, log=True)}
+    check_untuned(space, {"gamma": 0.9, "learning_rate": 1e-3})
+    with pytest.raises(ValueError, match=r"gamma: 0.99 is none of \[0.9, 0.95\]; learning_rate: 0.01 is "
+                       r"outside \[0.0001, 0.001\]"):  # fmt: skip
+        check_untuned(space, {"gamma": 0.99, "learning_rate": 1e-2})
+    with pytest.raises(ValueError, match="learning_rate: none given"):
+        check_untuned(space, {"gamma": 0.9})
+    for task in ("DiscreteArrows-v0", "DiscreteAlphabet-v0", "ContinuousArrows-v0", "ContinuousAlphabet-v0"):
+        check_untuned(tuning.search_space("planner"), tuning.untuned(task, "planner", "fast-tactile"))
+
+
+def test_a_tuned_runs_method_says_so_and_names_what_the_search_changed():
+    config = preset_config("fast-tactile", ARROWS, "planner")
+    assert run_method(config, tuned=True) == "tactile_braille planner (`fast-tactile`, tuned)"
+    changed = preset_config("fast-tactile", ARROWS, "planner", agent={"gamma": 0.95})
+    tuned = "tactile_braille planner (`fast-tactile`, tuned: agent.gamma=0.95)"
+    assert run_method(changed, tuned=True) == tuned
+    assert run_method(changed) == "tactile_braille planner (`fast-tactile`, agent.gamma=0.95)"
