@@ -5,6 +5,7 @@ training loop, then final runs on fresh seeds whose records carry the search."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -14,9 +15,10 @@ from tactile_braille.agents.presets import preset_config
 from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
 from tactile_braille.evaluation.results import read_result
 from tactile_braille.evaluation.runs import run_method
-from tactile_braille.search import Choice, Range, check_untuned
+from tactile_braille.search import TUNING_SEEDS, Choice, Range, check_untuned
 
 ARROWS = "tactile_braille/DiscreteArrows-v0"
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.slow
@@ -99,3 +101,24 @@ def test_a_tuned_runs_method_says_so_and_names_what_the_search_changed():
     tuned = "tactile_braille planner (`fast-tactile`, tuned: agent.gamma=0.95)"
     assert run_method(changed, tuned=True) == tuned
     assert run_method(changed) == "tactile_braille planner (`fast-tactile`, agent.gamma=0.95)"
+
+
+def test_the_committed_searches_of_our_agents_read_and_their_final_runs_carry_them_whole():
+    """Each record of a search of one of our agents in results/searches reads as a finished search on a
+    tuning seed within the agent's space; the tuned records of that task, agent and preset in
+    results/tuned carry it unchanged, and ran its best settings."""
+    records = sorted((REPOSITORY / "results" / "searches").glob("*__*__*.json"))
+    assert records
+    for record in records:
+        task, algo, preset = record.stem.split("__")
+        found = tuning.search_record(record.parent, task, algo, preset)
+        assert found["seed"] in TUNING_SEEDS and found["trials"] == len(found["trial_log"])
+        assert set(found["best"]["params"]) == set(tuning.search_space(algo))
+        finals = sorted((REPOSITORY / "results" / "tuned").glob(f"{task}__{algo}__tuned__*/result.json"))
+        assert len(finals) >= 5, record.name
+        for final in finals:
+            config = TrainConfig.from_json(json.loads((final.parent / "config.json").read_text()))
+            assert read_result(final)["tuning"] == found, final
+            assert config.preset == preset and config.seed not in TUNING_SEEDS
+            best = found["best"]["params"]
+            assert {name: getattr(config.agent, name) for name in best} == best
