@@ -56,6 +56,20 @@ def test_a_search_of_the_planner_goes_on_and_its_final_runs_carry_it(env_dataset
     assert result["method"] == run_method(config, tuned=True)
     assert result["method"].startswith("tactile_braille planner (`fast-tactile`, tuned")
     assert "| 2 trials |" in leaderboard_markdown(load_results([record]))
+    assert "seeds" not in result["tuning"] or result["tuning"]["seeds"] == [100]
+
+    # Several tuning seeds: each trial trains on each in turn, and scores their mean.
+    several = tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 1, tmp_path / "several",
+                          seeds=(101, 102), machine={**machine, "epochs": 1})  # fmt: skip
+    (trial,) = several["trial_log"]
+    assert several["seeds"] == [101, 102] and several["objective"].endswith("the mean over the tuning seeds")
+    assert len(trial["per_seed"]) == 2 and trial["accuracy"] == pytest.approx(
+        sum(accuracy for accuracy, _ in trial["per_seed"]) / 2
+    )
+    with pytest.raises(ValueError, match=r"searches with seeds \[101, 102\], not \[101\]"):
+        tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 2, tmp_path / "several", seeds=(101,),
+                    machine={**machine, "epochs": 1})  # fmt: skip
+
     again_records = tuning.run_seeds("DiscreteArrows-v0", "planner", "fast-tactile", study, [7],
                                      tmp_path / "runs", tmp_path / "records", machine)  # fmt: skip
     assert again_records == [record] and read_result(record / "result.json") == result  # not run again
@@ -63,7 +77,7 @@ def test_a_search_of_the_planner_goes_on_and_its_final_runs_carry_it(env_dataset
 
 def test_a_search_is_refused_before_any_study_is_made(tmp_path):
     with pytest.raises(ValueError, match="a search trains on tuning seeds"):
-        tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 1, tmp_path, seed=0)
+        tuning.tune("DiscreteArrows-v0", "planner", "fast-tactile", 1, tmp_path, seeds=(100, 0))
     with pytest.raises(ValueError, match=r"dqn has no search space \(DQNConfig.search_space is empty\)"):
         tuning.tune("DiscreteArrows-v0", "dqn", "paper", 1, tmp_path)
     with pytest.raises(ValueError, match=r"\['replay'\] are not machine settings"):

@@ -969,7 +969,7 @@ def _tune(args: argparse.Namespace) -> int:
 
     if args.action == "search":
         found = tuning.tune(
-            args.task, args.algo, args.preset, args.trials, args.study, args.seed, _machine(args)
+            args.task, args.algo, args.preset, args.trials, args.study, args.seeds, _machine(args)
         )
         best = found["best"]
         if best is None:
@@ -995,9 +995,9 @@ def _typed(result_file: Path) -> str:
 def _add_tune_command(commands) -> None:
     """The ``tune`` command: the benchmark's tuning protocol for this project's agents."""
     tune = commands.add_parser(
-        "tune", help="search an agent's settings on a tuning seed (Optuna), then train them on fresh seeds",
+        "tune", help="search an agent's settings on tuning seeds (Optuna), then train them on fresh seeds",
         description="The benchmark's tuning protocol (docs/benchmark.md): `search` runs an Optuna study of "
-        "the agent's search space from a preset on a tuning seed; `run` trains the best trial's settings on "
+        "the agent's search space from a preset on tuning seeds; `run` trains the best trial's settings on "
         "fresh seeds and archives their records, each carrying the search.",
     )  # fmt: skip
     actions = tune.add_subparsers(dest="action", required=True)
@@ -1010,22 +1010,19 @@ def _add_tune_command(commands) -> None:
         action.add_argument("--study", type=Path, required=True,
                             help="folder of the search's study (SQLite) and its record (JSON; `run` reads "
                             "either)")  # fmt: skip
-        action.add_argument(
-            "--epochs", type=int, default=None, help="each run's epochs (default: the preset's)"
-        )
+        action.add_argument("--epochs", type=int, default=None, help="each run's epochs (the preset's)")
         action.add_argument("--precision", choices=(*PRECISIONS, "auto"), default="fp32")
         action.add_argument("--threads", type=int, default=1, help="torch threads per run (default 1)")
         action.add_argument("--device", default=None, help="torch device (default cpu)")
         action.add_argument("--dataset", default=None, help="the dataset backend's file (default: cached)")
         action.set_defaults(handler=_tune)
-    actions.choices["search"].add_argument(
-        "--trials", type=int, required=True, help="trials to finish in all"
-    )
-    actions.choices["search"].add_argument("--seed", type=int, default=100, help="the tuning seed (100)")
-    actions.choices["run"].add_argument("--seeds", type=int, nargs="+", required=True, help="fresh seeds")
-    actions.choices["run"].add_argument("--root", type=Path, default=Path("runs/tuned"),
-                                        help="the runs' folders (default runs/tuned)")  # fmt: skip
-    actions.choices["run"].add_argument("--into", type=Path, required=True, help="folder of the records")
+    search, run = actions.choices["search"], actions.choices["run"]
+    search.add_argument("--trials", type=int, required=True, help="trials to finish in all")
+    search.add_argument("--seeds", type=int, nargs="+", default=[100],
+                        help="the tuning seeds each trial trains on, in turn (100)")  # fmt: skip
+    run.add_argument("--seeds", type=int, nargs="+", required=True, help="fresh seeds (not tuning seeds)")
+    run.add_argument("--root", type=Path, default=Path("runs/tuned"), help="the runs' folders (runs/tuned)")
+    run.add_argument("--into", type=Path, required=True, help="folder of the records")
 
 
 def _archive(args: argparse.Namespace) -> int:

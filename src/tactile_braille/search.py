@@ -2,12 +2,12 @@
 
 1. **Search** (:func:`search`): an Optuna study (TPE sampler; median pruning on the typing score at a
    third and two thirds of a trial's budget) over a stated search space, each trial trained on one
-   tuning seed (100 unless told; seeds 100-199 are never reported) and scored by typing accuracy,
-   then by fewer steps, under the paper's protocol. The untuned settings are always among the
-   trials. The study lives in a SQLite file whose trials send a heartbeat, so a killed search
-   resumes where it stopped (its unfinished trial is failed and run again), and two processes can
-   search one study side by side. After each trial the search's record (:func:`summary`) is
-   written beside the study as JSON.
+   tuning seed or on several in turn (100 unless told; seeds 100-199 are never reported) and scored
+   by typing accuracy, then by fewer steps, under the paper's protocol (the mean over its seeds). The
+   untuned settings are always among the trials. The study lives in a SQLite file whose trials send
+   a heartbeat, so a killed search resumes where it stopped (its unfinished trial is failed and run
+   again), and two processes can search one study side by side. After each trial the search's record
+   (:func:`summary`) is written beside the study as JSON.
 2. **Final runs**: the best trial's settings on fresh seeds; each results file records the search
    under ``tuning`` (:func:`finished_search` reads it back from the study, or from the record alone
    on a machine without the study).
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -145,9 +145,9 @@ def search(
     space: Space,
     untuned: dict[str, Any],
     trials: int,
-    seed: int,
+    seeds: Sequence[int],
     steps: int,
-    train_and_score: Callable[[dict, Check], tuple[TypingReport, float]],
+    train_and_score: Callable[[dict, int, Check], tuple[TypingReport, float]],
 ) -> dict:
     """Run the search until the study at ``study_path`` holds ``trials`` finished or pruned trials,
     counting those other processes are running (the module docstring); returns :func:`summary`, also
@@ -160,24 +160,23 @@ def search(
         space: the search space; ``untuned``: the settings before any search (a value for each of the
             space's names), always among the trials.
         trials: trials to finish in all.
-        seed: the tuning seed every trial trains on; ``steps``: each trial's training steps. A study
-            searches with one seed and one budget: another is refused.
-        train_and_score: trains one trial with ``settings`` (the space's names) and returns its typing
+        seeds: the tuning seeds every trial trains on, one after the other (its score: the mean of
+            theirs); ``steps``: each training run's steps. A study searches with one set of seeds and
+            one budget: another is refused.
+        train_and_score: trains ``settings`` (the space's names) on one seed and returns its typing
             report and minutes of training; it calls ``check(steps_done, report)`` at
-            :func:`check_points` where it can (pruning).
+            :func:`check_points` where it can. A trial may be pruned at those checks and after each
+            seed but the last (its steps counted on from the seeds before).
     """
     optuna = _optuna()
-    check_tuning_seed(seed)
+    seeds = [int(seed) for seed in seeds]
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ValueError(f"a search needs one or more distinct tuning seeds, got {seeds}")
+    for seed in seeds:
+        check_tuning_seed(seed)
     check_untuned(space, untuned)
     study = open_study(study_path, Path(study_path).stem, create=True)
-    for name, value in (("seed", seed), ("steps", steps)):
-        recorded = study.user_attrs.get(name)
-        if recorded is None:
-            study.set_user_attr(name, value)
-        elif recorded != value:
-            raise ValueError(
-                f"{study_path} searches with {name} {recorded}, not {value}: one study, one protocol"
-            )
+    _claim(study, study_path, seeds, steps)
     first = {name: untuned[name] for name in space}
     queued = [t.params or t.system_attrs.get("fixed_params") for t in study.trials if t.state.name != "FAIL"]
     if first not in queued:  # the untuned settings are always among the trials
@@ -185,19 +184,27 @@ def search(
 
     def run_trial(trial) -> float:
         settings = _suggest(trial, space)
-        trial.set_user_attr("seed", seed)
+        trial.set_user_attr("seed", seeds[0])
         trial.set_user_attr("steps", steps)
+        reports, minutes = [], 0.0
+        for index, seed in enumerate(seeds):
 
-        def check(done: int, report: TypingReport) -> None:
-            trial.report(objective(report), done)
-            if trial.should_prune():
-                raise optuna.TrialPruned()
+            def check(done: int, report: TypingReport, before: int = index * steps) -> None:
+                trial.report(objective(report), before + done)
+                if trial.should_prune():
+                    raise optuna.TrialPruned()
 
-        report, minutes = train_and_score(settings, check)
-        trial.set_user_attr("accuracy", report.accuracy)
-        trial.set_user_attr("total_steps", report.total_steps)
+            report, taken = train_and_score(settings, seed, check)
+            reports.append(report)
+            minutes += taken
+            if index + 1 < len(seeds):
+                check(steps, report)
+        trial.set_user_attr("accuracy", float(np.mean([r.accuracy for r in reports])))
+        trial.set_user_attr("total_steps", float(np.mean([r.total_steps for r in reports])))
+        if len(seeds) > 1:
+            trial.set_user_attr("per_seed", [[r.accuracy, r.total_steps] for r in reports])
         trial.set_user_attr("minutes", round(minutes, 2))
-        return objective(report)
+        return float(np.mean([objective(r) for r in reports]))
 
     while True:
         _fail_stale(study)  # a killed process's trial is run again
@@ -210,19 +217,38 @@ def search(
     return result
 
 
+def _claim(study, study_path: Path, seeds: list[int], steps: int) -> None:
+    """Record the study's seeds and budget, or refuse others than those it recorded."""
+    if "seed" in study.user_attrs and "seeds" not in study.user_attrs:  # a one-seed study's record
+        study.set_user_attr("seeds", [study.user_attrs["seed"]])
+    for name, value in (("seeds", seeds), ("seed", seeds[0]), ("steps", steps)):
+        recorded = study.user_attrs.get(name)
+        if recorded is None:
+            study.set_user_attr(name, value)
+        elif recorded != value:
+            raise ValueError(
+                f"{study_path} searches with {name} {recorded}, not {value}: one study, one protocol"
+            )
+
+
 def summary(study, identity: dict[str, Any], space: Space, untuned: dict[str, Any]) -> dict:
     """The search as a results file records it: what was searched, the space, the untuned settings,
-    the budget, the tuning seed, its finished trials (the count, and each), the best."""
+    the budget, the tuning seeds (``seed``: the first), its finished trials (the count, and each), the
+    best. With several seeds a trial's accuracy and steps are their means, and ``per_seed`` lists each
+    seed's (accuracy, steps)."""
     finished = _finished(study)
     complete = [t for t in finished if t.state.name == "COMPLETE"]
     best = max(complete, key=lambda t: t.value) if complete else None
+    seeds = study.user_attrs.get("seeds") or [study.user_attrs.get("seed")]
     return {
         **identity,
         "search": "optuna TPE, median pruning",
         "space": space_record(space),
         "defaults": untuned,
-        "objective": "typing accuracy, then fewer steps",
-        "seed": study.user_attrs.get("seed"),
+        "objective": "typing accuracy, then fewer steps"
+        + (", the mean over the tuning seeds" if len(seeds) > 1 else ""),
+        "seed": seeds[0],
+        "seeds": seeds,
         "steps": study.user_attrs.get("steps"),
         "trials": len(finished),
         "trial_log": [
@@ -261,6 +287,7 @@ def finished_search(study_path: Path, identity: dict[str, Any], space: Space, un
         if going:
             raise ValueError(f"{path}: trials {going} are still running or queued; let the search finish")
         tuning, source = summary(study, identity, space, untuned), path
+        _write_record(path, tuning)  # the record beside it says the same
     elif record.exists():
         tuning, source = json.loads(record.read_text()), record
         found = {name: tuning.get(name) for name in identity}

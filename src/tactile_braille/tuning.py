@@ -93,23 +93,25 @@ def tune(
     preset: str,
     trials: int,
     study_dir: Path,
-    seed: int = TUNING_SEEDS[0],
+    seeds=(TUNING_SEEDS[0],),
     machine: dict | None = None,
 ) -> dict:
     """Search the agent's settings on ``task`` from ``preset`` until the study holds ``trials`` finished
     or pruned trials (:func:`tactile_braille.search.search`); returns the search's record, also written
-    beside the study. ``machine``: :data:`MACHINE` settings of every trial (``epochs``: each trial's
-    length, the preset's by default)."""
+    beside the study. Each trial trains on each of the tuning ``seeds`` in turn and scores their mean.
+    ``machine``: :data:`MACHINE` settings of every run (``epochs``: each run's length, the preset's by
+    default)."""
     from tactile_braille.agents.training import make_env, train
 
     machine = dict(machine or {})
-    check_tuning_seed(seed)
+    for seed in seeds:
+        check_tuning_seed(seed)
     space = search_space(algo)
-    base = _config(task, algo, preset, seed, {}, machine)  # settings refused before a study is made
+    base = _config(task, algo, preset, seeds[0], {}, machine)  # settings refused before a study is made
     steps = base.epochs * base.steps_per_epoch
     trial_root = Path(study_dir) / "trials"
 
-    def train_and_score(settings: dict, check) -> tuple[Any, float]:
+    def train_and_score(settings: dict, seed: int, check) -> tuple[Any, float]:
         config = _config(task, algo, preset, seed, settings, machine)
         points = list(check_points(steps))
         trial_root.mkdir(parents=True, exist_ok=True)
@@ -131,7 +133,7 @@ def tune(
             shutil.rmtree(folder, ignore_errors=True)
 
     return search(_study_path(study_dir, task, algo, preset), _identity(task, algo, preset), space,
-                  untuned(task, algo, preset), trials, seed, steps, train_and_score)  # fmt: skip
+                  untuned(task, algo, preset), trials, seeds, steps, train_and_score)  # fmt: skip
 
 
 def _typing(config: TrainConfig, agent, make_env):

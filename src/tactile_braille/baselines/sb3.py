@@ -292,12 +292,12 @@ def tune(task: str, algo: str, trials: int, study_dir: Path, seed: int = TUNING_
     check_tuning_seed(seed)
     steps = steps or official_budget(task)
 
-    def train_and_score(settings: dict, check) -> tuple[TypingReport, float]:
+    def train_and_score(settings: dict, seed: int, check) -> tuple[TypingReport, float]:
         model, seconds = train(task, algo, settings, steps, seed, dataset, check_points(steps), check, device)
         return score(model, task, dataset), seconds / 60
 
     return search(Path(study_dir) / f"{task}__{algo}.db", _identity(task, algo), SEARCH_SPACES[algo],
-                  DEFAULTS[algo], trials, seed, steps, train_and_score)  # fmt: skip
+                  DEFAULTS[algo], trials, [seed], steps, train_and_score)  # fmt: skip
 
 
 def _where(device: str) -> str:

@@ -79,9 +79,10 @@ class Row:
     optimum: float | None = None
     paper: bool = False
     tuning: str = "-"
-    """How the method's settings were chosen: the search its results files record (``12 trials``, or
-    ``12 trials of 7,500 steps`` where its trials trained for fewer steps than the row), else ``-`` (no
-    search: published settings, or a preset chosen by hand; docs/benchmark.md)."""
+    """How the method's settings were chosen: the search its results files record (``12 trials``;
+    ``12 trials of 7,500 steps`` where its trials trained for fewer steps than the row; ``16 trials on 3
+    seeds`` where each trial trained on several tuning seeds), else ``-`` (no search: published
+    settings, or a preset chosen by hand; docs/benchmark.md)."""
     scores: list[float] = field(default_factory=list)
     """Each seed's :func:`typing_score` (the statistics' measure)."""
 
@@ -111,6 +112,8 @@ def _rows(results: list[tuple[str, dict]]) -> dict[str, list[Row]]:
             searched = f"{trials} trials" if isinstance(trials, int) and not isinstance(trials, bool) else "-"
             if searched != "-" and isinstance(trial_steps, int) and trial_steps != budget:
                 searched += f" of {trial_steps:,} steps"  # its trials trained for fewer steps than the row
+            if searched != "-" and len(tuning.get("seeds") or []) > 1:
+                searched += f" on {len(tuning['seeds'])} seeds"  # each trial trained on several seeds
             rows[key] = Row(result["method"], result["track"], result["fingerprint"], [], [], [],
                             report.get("touch_optimum"), tuning=searched)  # fmt: skip
         taken = seeds.setdefault(key, {})
