@@ -279,10 +279,6 @@ def _identity(task: str, algo: str) -> dict:
     return {"library": ALGORITHMS[algo].package, "algo": algo, "task": task}
 
 
-def _untuned(algo: str) -> dict:
-    return {name: DEFAULTS[algo][name] for name in SEARCH_SPACES[algo]}
-
-
 def tune(task: str, algo: str, trials: int, study_dir: Path, seed: int = TUNING_SEEDS[0], steps=None,
          dataset=None, device: str = "cpu") -> dict:  # fmt: skip
     """Run the search (:func:`tactile_braille.search.search`) until the study ``TASK__ALGO.db`` in
