@@ -136,3 +136,20 @@ def test_the_committed_searches_of_our_agents_read_and_their_final_runs_carry_th
             assert config.preset == preset and config.seed not in TUNING_SEEDS
             best = found["best"]["params"]
             assert {name: getattr(config.agent, name) for name in best} == best
+
+
+def test_a_study_keeps_the_space_it_searched(tmp_path):
+    """A study records its search space: a search of another space is refused, and its record gives the
+    space it searched, not the code's of the day."""
+    from tactile_braille import search
+
+    study, identity = tmp_path / "T__a.db", {"library": "x", "algo": "a", "task": "T"}
+    narrow, wide = {"gamma": Choice((0.9, 0.95))}, {"gamma": Choice((0.7, 0.9, 0.95))}
+    record = search.search(study, identity, narrow, {"gamma": 0.9}, 0, [100], 10, None)  # no trial to run
+    assert record["space"] == {"gamma": {"choice": [0.9, 0.95]}} and record["trials"] == 0
+    with pytest.raises(ValueError, match=r"searches with space .*0\.95.*, not .*0\.7.*: one study"):
+        search.search(study, identity, wide, {"gamma": 0.9}, 0, [100], 10, None)
+    assert (
+        search.summary(search.open_study(study, "T__a", create=False), identity, wide, {})["space"]
+        == (record["space"])
+    )

@@ -586,7 +586,7 @@ class PlannerConfig(AgentConfig):
     """
 
     search_space: ClassVar[Space] = {
-        "gamma": Choice((0.8, 0.85, 0.9, 0.95)),
+        "gamma": Choice((0.6, 0.7, 0.8, 0.85, 0.9, 0.95)),
         "learning_rate": Range(3e-4, 3e-3, log=True),
         "epsilon_decay_steps": Choice((500, 1000, 2000)),
         "refit_every": Choice((25, 50, 100)),
