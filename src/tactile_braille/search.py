@@ -176,7 +176,7 @@ def search(
         check_tuning_seed(seed)
     check_untuned(space, untuned)
     study = open_study(study_path, Path(study_path).stem, create=True)
-    _claim(study, study_path, seeds, steps, space)
+    _claim(study, study_path, seeds, steps, space, untuned)
     first = {name: untuned[name] for name in space}
     queued = [t.params or t.system_attrs.get("fixed_params") for t in study.trials if t.state.name != "FAIL"]
     if first not in queued:  # the untuned settings are always among the trials
@@ -217,12 +217,21 @@ def search(
     return result
 
 
-def _claim(study, study_path: Path, seeds: list[int], steps: int, space: Space) -> None:
-    """Record the study's seeds, budget and space, or refuse others than those it recorded."""
+def _claim(study, study_path: Path, seeds: list[int], steps: int, space: Space, untuned: dict) -> None:
+    """Record the study's seeds, budget, space and untuned settings, or refuse others than those it
+    recorded."""
     if "seed" in study.user_attrs and "seeds" not in study.user_attrs:  # a one-seed study's record
         study.set_user_attr("seeds", [study.user_attrs["seed"]])
-    searched = json.loads(json.dumps(space_record(space)))  # as the study stores it
-    for name, value in (("seeds", seeds), ("seed", seeds[0]), ("steps", steps), ("space", searched)):
+    searched = json.loads(json.dumps(space_record(space), default=json_value))  # as the study stores it
+    untuned = json.loads(json.dumps(untuned, default=json_value))
+    claims = (
+        ("seeds", seeds),
+        ("seed", seeds[0]),
+        ("steps", steps),
+        ("space", searched),
+        ("defaults", untuned),
+    )
+    for name, value in claims:
         recorded = study.user_attrs.get(name)
         if recorded is None:
             study.set_user_attr(name, value)
@@ -233,8 +242,8 @@ def _claim(study, study_path: Path, seeds: list[int], steps: int, space: Space) 
 
 
 def summary(study, identity: dict[str, Any], space: Space, untuned: dict[str, Any]) -> dict:
-    """The search as a results file records it: what was searched, the space (the one the study
-    recorded; ``space`` for a study that recorded none), the untuned settings,
+    """The search as a results file records it: what was searched, the space and the untuned
+    settings (those the study recorded; ``space`` and ``untuned`` for a study that recorded none),
     the budget, the tuning seeds (``seed``: the first), its finished trials (the count, and each), the
     best. With several seeds a trial's accuracy and steps are their means, and ``per_seed`` lists each
     seed's (accuracy, steps)."""
@@ -246,7 +255,7 @@ def summary(study, identity: dict[str, Any], space: Space, untuned: dict[str, An
         **identity,
         "search": "optuna TPE, median pruning",
         "space": study.user_attrs.get("space") or space_record(space),  # what it searched
-        "defaults": untuned,
+        "defaults": study.user_attrs.get("defaults") or untuned,  # what its first trial ran
         "objective": "typing accuracy, then fewer steps"
         + (", the mean over the tuning seeds" if len(seeds) > 1 else ""),
         "seed": seeds[0],
