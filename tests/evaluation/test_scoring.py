@@ -644,4 +644,6 @@ def test_every_committed_results_file_names_the_method_its_settings_ran():
     assert recorded, "the repository commits run records with results files"
     for file in recorded:
         config = TrainConfig.from_json(json.loads((file.parent / "config.json").read_text()))
-        assert read_result(file)["method"] == run_method(config), file
+        tuned = (file.parent / "tuning.json").exists()  # a search chose its settings
+        assert read_result(file)["method"] == run_method(config, tuned=tuned), file
+        assert ("tuning" in read_result(file)) == tuned, file
