@@ -593,6 +593,7 @@ class PlannerConfig(AgentConfig):
         "sharpen": Choice((2.0, 4.0, 8.0)),
         "accept": Choice((0.8, 0.9, 0.95)),
         "repeat_penalty": Choice((0.0, 0.05, 0.1, 0.2)),
+        "outcome_memory": Choice((False, True)),
     }
 
     gamma: float = 0.9
