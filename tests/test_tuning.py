@@ -118,24 +118,28 @@ def test_a_tuned_runs_method_says_so_and_names_what_the_search_changed():
 
 
 def test_the_committed_searches_of_our_agents_read_and_their_final_runs_carry_them_whole():
-    """Each record of a search of one of our agents in results/searches reads as a finished search on a
-    tuning seed within the agent's space; the tuned records of that task, agent and preset in
-    results/tuned carry it unchanged, and ran its best settings."""
-    records = sorted((REPOSITORY / "results" / "searches").glob("*__*__*.json"))
+    """Each record of a search of one of our agents under results/searches reads as a finished search on
+    tuning seeds within the agent's space, and five or more tuned records (results/tuned*/) carry it
+    unchanged and ran its best settings; every tuned record carries one of them."""
+    records = sorted((REPOSITORY / "results" / "searches").glob("**/*__*__*.json"))
     assert records
+    searches = []
     for record in records:
         task, algo, preset = record.stem.split("__")
         found = tuning.search_record(record.parent, task, algo, preset)
-        assert found["seed"] in TUNING_SEEDS and found["trials"] == len(found["trial_log"])
+        assert set(found.get("seeds") or [found["seed"]]) <= set(TUNING_SEEDS)
+        assert found["trials"] == len(found["trial_log"])
         assert set(found["best"]["params"]) == set(found["space"]) <= set(tuning.search_space(algo))
-        finals = sorted((REPOSITORY / "results" / "tuned").glob(f"{task}__{algo}__tuned__*/result.json"))
-        assert len(finals) >= 5, record.name
-        for final in finals:
-            config = TrainConfig.from_json(json.loads((final.parent / "config.json").read_text()))
-            assert read_result(final)["tuning"] == found, final
-            assert config.preset == preset and config.seed not in TUNING_SEEDS
-            best = found["best"]["params"]
-            assert {name: getattr(config.agent, name) for name in best} == best
+        searches.append([found, 0])
+    for final in sorted((REPOSITORY / "results").glob("tuned*/*/result.json")):
+        config = TrainConfig.from_json(json.loads((final.parent / "config.json").read_text()))
+        carried = read_result(final)["tuning"]
+        (entry,) = [entry for entry in searches if entry[0] == carried]  # one committed search, whole
+        entry[1] += 1
+        assert config.preset == carried["preset"] and config.seed not in TUNING_SEEDS
+        best = carried["best"]["params"]
+        assert {name: getattr(config.agent, name) for name in best} == best, final
+    assert all(count >= 5 for _, count in searches), [(f["task"], f.get("seeds"), n) for f, n in searches]
 
 
 def test_a_study_keeps_the_space_it_searched(tmp_path):
