@@ -94,6 +94,28 @@ def test_the_values_are_the_discounted_shortest_paths_and_the_agent_walks_them(p
     assert planner.action_values(unsure, up)[PRESS] == pytest.approx(0.5)
 
 
+def test_test_episodes_plan_with_their_own_discount(discrete_env):
+    """``test_gamma``: test episodes and typing value paths with it, exploring with ``gamma``; an unseen
+    move is worth the discount of its stream."""
+    moves, _ = true_graph(discrete_env)
+    config = PlannerConfig(gamma=0.9, test_gamma=0.5)
+    agent = PlannerAgent(discrete_env.observation_space, discrete_env.action_space, config)
+    given_graph(agent, moves)
+    left, right = (discrete_env.unwrapped.goal_keys.index(k) for k in ("LEFT", "RIGHT"))
+    assert agent._values[right, left] == pytest.approx(0.9**2, rel=1e-6)
+    assert agent._test_values[right, left] == pytest.approx(0.5**2, rel=1e-6)
+    sure = np.eye(len(agent.state_class))[left]
+    assert agent.action_values(sure, right)[DISCRETE_ACTIONS.index("RIGHT")] == pytest.approx(0.9**2)
+    assert agent.action_values(sure, right, episode=True)[DISCRETE_ACTIONS.index("RIGHT")] == pytest.approx(
+        0.5**2
+    )
+    given_graph(agent, moves, visits=0.0)
+    assert np.all(agent.action_values(sure, right, episode=True)[:MOVES] == 0.5)
+    assert np.all(agent.action_values(sure, right)[:MOVES] == 0.9)
+    with pytest.raises(ValueError, match=r"test_gamma must be in \[0, 1\]"):
+        PlannerConfig(test_gamma=1.5)
+
+
 def test_a_move_the_graph_has_not_seen_is_worth_trying(planner, discrete_env):
     moves, _ = true_graph(discrete_env)
     given_graph(planner, moves, visits=0.0)

@@ -71,6 +71,7 @@ arm's pose at each tap and the calibrated key layout."""
 HYPERPARAMETER_RANGES: dict[str, tuple[str, Any]] = {
     "batch_size": ("must be at least 1", lambda v: v >= 1),
     "gamma": ("must be in [0, 1]", lambda v: 0.0 <= v <= 1.0),
+    "test_gamma": ("must be in [0, 1] (or None: gamma)", lambda v: v is None or 0.0 <= v <= 1.0),
     "tau": ("must be in (0, 1]", lambda v: 0.0 < v <= 1.0),
     "pressed_key": ("is a loss weight: at least 0", lambda v: v >= 0),
     **dict.fromkeys(
@@ -540,6 +541,8 @@ class PlannerConfig(AgentConfig):
         epsilon_start, epsilon_end: random actions at the start and the end of the schedule.
         epsilon_decay_steps: environment steps over which epsilon decays linearly.
         test_epsilon: random actions during test episodes (0: deterministic).
+        test_gamma: the discount of test episodes' and typing's plans (None: ``gamma``): exploring,
+            the plan may look further ahead than it does typing.
         batch_size: labelled frames per update of the key reader.
         hidden: units of the key reader's dense layers.
         refit_every: the graph, the labels and the values are refitted from the replay after this
@@ -603,6 +606,7 @@ class PlannerConfig(AgentConfig):
     epsilon_end: float = 0.1
     epsilon_decay_steps: int = 1000
     test_epsilon: float = 0.0
+    test_gamma: float | None = None
     batch_size: int = 64
     hidden: tuple[int, ...] = (128,)
     refit_every: int = 50

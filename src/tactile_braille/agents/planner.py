@@ -22,8 +22,9 @@ It acts on a belief over states, the reader's probabilities filtered through
 the graph and the previous action (a discrete Bayes filter, which keeps the
 belief of the episode in progress), by QMDP: PRESS is worth the belief that
 the goal is under the sensor, a move the discounted value of where the graph
-says it leads (value iteration per goal, ``gamma``); a move the graph has not
-seen from the believed state is worth ``gamma`` (optimism, so that the run
+says it leads (value iteration per goal, ``gamma``; ``test_gamma`` in test
+episodes and typing); a move the graph has not seen from the believed state
+is worth the discount (optimism, so that the run
 explores it). ``repeat_penalty`` takes value off an action already taken from
 the believed state in the episode (in the generic *nothing*, an episode's start
 off the keys, only after ``free_repeats``: there repeating the best move is a
@@ -305,25 +306,30 @@ class PlannerAgent(Agent):
             self._outcomes[seen] = outcome
             self._episode_plans = {}  # replanned with it
 
+    def _gamma(self, episode: bool) -> float:
+        """The discount of a plan: ``test_gamma`` in test episodes and typing where it is set."""
+        test = self.config.test_gamma
+        return test if episode and test is not None else self.config.gamma
+
     def _model(self, goal: int, episode: bool) -> tuple[np.ndarray, np.ndarray]:
         """The moves and the goal's values a plan acts on: the graph's, or in the test episode with
         ``outcome_memory`` the graph with each move already seen from a state leading where it led."""
         if not (episode and self._outcomes):
-            return self._moves, self._values[goal]
+            return self._moves, (self._test_values if episode else self._values)[goal]
         if goal not in self._episode_plans:
             moves = self._moves.copy()
             for (state, move), outcome in self._outcomes.items():
                 moves[state, move] = 0.0
                 moves[state, move, outcome] = 1.0
             rewards = (self.state_class == goal).astype(np.float64)[None]
-            self._episode_plans[goal] = (moves, self._value_iteration(moves, rewards)[0])
+            self._episode_plans[goal] = (moves, self._value_iteration(moves, rewards, self._gamma(True))[0])
         return self._episode_plans[goal]
 
     def action_values(self, belief: np.ndarray, goal: int, episode: bool = False) -> np.ndarray:
         """QMDP values of the actions under ``belief`` (over states) for the goal key ``goal``: the
         moves', then PRESS's (the belief on the goal); ``episode``: on the test episode's model
         (:meth:`_model`)."""
-        gamma = self.config.gamma
+        gamma = self._gamma(episode)
         graph, values = self._model(goal, episode)
         moves = gamma * np.einsum("s,smt,t->m", belief, graph, values)
         if self.config.optimism:
@@ -511,12 +517,15 @@ class PlannerAgent(Agent):
         self._visits = self.graph.visits.double().cpu().numpy()
         self._prior = self.graph.prior.double().cpu().numpy()
         rewards = (np.arange(self.keys)[:, None] == self.state_class[None]).astype(np.float64)
-        self._values = self._value_iteration(self._moves, rewards)
+        self._values = self._value_iteration(self._moves, rewards, self._gamma(False))
+        test = self._gamma(True)
+        same = test == self._gamma(False)
+        self._test_values = self._values if same else self._value_iteration(self._moves, rewards, test)
         self._outcomes, self._episode_plans = {}, {}
 
-    def _value_iteration(self, moves: np.ndarray, rewards: np.ndarray) -> np.ndarray:
+    def _value_iteration(self, moves: np.ndarray, rewards: np.ndarray, gamma: float) -> np.ndarray:
         """Values (goals, states) on ``moves`` (states, moves, states) of pressing worth ``rewards``
-        (goals, states), ``planning_sweeps`` sweeps."""
+        (goals, states), discounted by ``gamma``, ``planning_sweeps`` sweeps."""
         values = rewards.copy()
         lost = self.config.lost_value
         for _ in range(self.config.planning_sweeps):
@@ -524,9 +533,9 @@ class PlannerAgent(Agent):
             if lost is not None:  # the generic nothing, entered from elsewhere
                 ahead = values.copy()
                 ahead[:, self.lost_states] *= lost
-            backed = self.config.gamma * np.einsum("smt,gt->gsm", moves, ahead).max(-1)
+            backed = gamma * np.einsum("smt,gt->gsm", moves, ahead).max(-1)
             if lost is not None:  # acting from it, its own moves as they are
-                backed[:, self.lost_states] = self.config.gamma * np.einsum(
+                backed[:, self.lost_states] = gamma * np.einsum(
                     "smt,gt->gsm", moves[self.lost_states], values
                 ).max(-1)
             values = np.maximum(rewards, backed)

@@ -88,7 +88,7 @@ _ARROWS_FAST = {"start_steps": 200, "touch": {"refit_every": 200, "refits": 4}}
 TASK_PRESETS: dict[str, TaskPresets] = {
     "tactile_braille/DiscreteArrows-v0": TaskPresets(
         paper_epochs=25, fast_epochs=8, fast_tactile_epochs=8, fast=_ARROWS_FAST,
-        planner_agent={"gamma": 0.7, "outcome_memory": True},
+        planner_agent={"test_gamma": 0.7, "outcome_memory": True},
     ),
     "tactile_braille/DiscreteAlphabet-v0": TaskPresets(
         paper_epochs=100, fast_epochs=25, fast_tactile_epochs=25,
@@ -266,9 +266,9 @@ def planner_changes(task: str) -> dict[str, Any]:
     typing, it presses only where the frame itself reads the goal at 0.8 or more (``press_reading``),
     and never on an episode's first frame (``first_press`` False). On the continuous alphabet its moves
     are 18 mm (``move`` 0.9), shorter than nearly every key along a row. On the discrete arrows its
-    plans discount at 0.7 (``gamma``; the alphabets' longer paths keep 0.9). On the discrete arrows
-    and the continuous alphabet its test episodes and typing plan on where each move already taken led
-    (``outcome_memory``). On the discrete tasks its
+    test episodes and typing plan with a discount of 0.7 (``test_gamma``; exploring, and on the
+    alphabets' longer paths, 0.9). On the discrete arrows and the continuous alphabet its test episodes
+    and typing plan on where each move already taken led (``outcome_memory``). On the discrete tasks its
     backtracking weighs each state by how often it is occupied (``backtrack_prior``); on the discrete
     tasks and the continuous alphabet a move into the generic *nothing* is worth none of that state's
     value (``lost_value`` 0). Each was tuned on seeds 100-102; docs/notes/key-graph-planner.md and
