@@ -28,22 +28,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from tactile_braille import search as protocol
 from tactile_braille._io import LockedError, atomic_path
 from tactile_braille.agents.config import TrainConfig
 from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.registry import agent_spec
 from tactile_braille.agents.run import MACHINE_SETTINGS
 from tactile_braille.envs.registry import task_name
-from tactile_braille.search import (
-    TUNING_SEEDS,
-    Space,
-    check_points,
-    check_reported_seeds,
-    check_tuning_seed,
-    finished_search,
-    json_value,
-    search,
-)
+from tactile_braille.search import TUNING_SEEDS, Space
 
 MACHINE = (*MACHINE_SETTINGS, "precision")
 """The settings a search or its final runs may be given on top of the preset and the searched ones:
@@ -105,7 +97,7 @@ def tune(
 
     machine = dict(machine or {})
     for seed in seeds:
-        check_tuning_seed(seed)
+        protocol.check_tuning_seed(seed)
     space = search_space(algo)
     base = _config(task, algo, preset, seeds[0], {}, machine)  # settings refused before a study is made
     steps = base.epochs * base.steps_per_epoch
@@ -113,7 +105,7 @@ def tune(
 
     def train_and_score(settings: dict, seed: int, check) -> tuple[Any, float]:
         config = _config(task, algo, preset, seed, settings, machine)
-        points = list(check_points(steps))
+        points = list(protocol.check_points(steps))
         trial_root.mkdir(parents=True, exist_ok=True)
         folder = Path(tempfile.mkdtemp(prefix="trial-", dir=trial_root))
         trained: dict[str, Any] = {}
@@ -132,7 +124,7 @@ def tune(
         finally:
             shutil.rmtree(folder, ignore_errors=True)
 
-    return search(_study_path(study_dir, task, algo, preset), _identity(task, algo, preset), space,
+    return protocol.search(_study_path(study_dir, task, algo, preset), _identity(task, algo, preset), space,
                   untuned(task, algo, preset), trials, seeds, steps, train_and_score)  # fmt: skip
 
 
@@ -147,7 +139,7 @@ def _typing(config: TrainConfig, agent, make_env):
 def search_record(study_dir: Path, task: str, algo: str, preset: str) -> dict:
     """The finished search of ``algo`` from ``preset`` on ``task``: from its study in ``study_dir``, or
     else from the record written beside it (:func:`tactile_braille.search.finished_search`)."""
-    return finished_search(_study_path(study_dir, task, algo, preset), _identity(task, algo, preset),
+    return protocol.finished_search(_study_path(study_dir, task, algo, preset), _identity(task, algo, preset),
                            search_space(algo), untuned(task, algo, preset))  # fmt: skip
 
 
@@ -170,7 +162,7 @@ def run_seeds(
     from tactile_braille.evaluation.runs import TUNING_FILE, evaluate_typing
     from tactile_braille.sweep import archive_run
 
-    check_reported_seeds(seeds)
+    protocol.check_reported_seeds(seeds)
     machine = dict(machine or {})
     tuning = search_record(study_dir, task, algo, preset)
     settings = tuning["best"]["params"]
@@ -185,7 +177,7 @@ def run_seeds(
         started = (run_dir / "config.json").exists()  # resumed (a change of settings is refused)
         run_dir.mkdir(parents=True, exist_ok=True)
         with atomic_path(run_dir / TUNING_FILE) as temporary:
-            temporary.write_text(json.dumps(tuning, indent=2, default=json_value) + "\n")
+            temporary.write_text(json.dumps(tuning, indent=2, default=protocol.json_value) + "\n")
         try:
             train(config, run_dir=run_dir, resume=started, progress=False)
         except LockedError:
