@@ -956,9 +956,10 @@ def _add_sweep_command(commands) -> None:
 
 def _machine(args: argparse.Namespace) -> dict:
     """The machine settings given to ``tune`` (:data:`tactile_braille.tuning.MACHINE`)."""
+    from tactile_braille.agents.run import MACHINE_SETTINGS
     from tactile_braille.cli_config import resolve_precision
 
-    given = {name: getattr(args, name) for name in ("epochs", "device", "threads", "dataset")}
+    given = {name: getattr(args, name) for name in MACHINE_SETTINGS}
     machine = {name: value for name, value in given.items() if value is not None}
     machine["precision"] = resolve_precision(args.precision, args.device or "cpu")
     return machine
