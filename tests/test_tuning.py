@@ -10,8 +10,10 @@ from pathlib import Path
 import pytest
 
 from tactile_braille import tuning
+from tactile_braille._tasks import REGISTERED_TASKS
 from tactile_braille.agents.config import TrainConfig
 from tactile_braille.agents.presets import preset_config
+from tactile_braille.agents.registry import agent_names, agent_spec
 from tactile_braille.evaluation.leaderboard import leaderboard_markdown, load_results
 from tactile_braille.evaluation.results import read_result
 from tactile_braille.evaluation.runs import run_method
@@ -106,6 +108,7 @@ def test_the_untuned_settings_must_lie_in_the_space():
         check_untuned(space, {"gamma": 0.9})
     for task in ("DiscreteArrows-v0", "DiscreteAlphabet-v0", "ContinuousArrows-v0", "ContinuousAlphabet-v0"):
         check_untuned(tuning.search_space("planner"), tuning.untuned(task, "planner", "fast-tactile"))
+        check_untuned(tuning.search_space("mrq"), tuning.untuned(task, "mrq", "paper"))
 
 
 def test_a_tuned_runs_method_says_so_and_names_what_the_search_changed():
@@ -157,3 +160,17 @@ def test_a_study_keeps_the_space_it_searched(tmp_path):
         search.summary(search.open_study(study, "T__a", create=False), identity, wide, {})["space"]
         == (record["space"])
     )
+
+
+def test_every_point_a_search_space_names_makes_a_run_the_agent_accepts():
+    """A trial must never fail on its settings: each agent's every choice, and its ranges' ends, make a
+    valid run of the preset the agent is searched from, on every task it learns."""
+    searched = {name: agent_spec(name) for name in agent_names() if agent_spec(name).config.search_space}
+    assert {"planner", "mrq"} <= set(searched)
+    for algo, spec in searched.items():
+        preset = "fast-tactile" if algo == "planner" else "paper"
+        for task in (registered.env_id for registered in REGISTERED_TASKS):
+            for name, dim in spec.config.search_space.items():
+                for value in (dim.low, dim.high) if isinstance(dim, Range) else dim:
+                    config = preset_config(preset, task, algo, seed=100, agent={name: value})
+                    assert getattr(config.agent, name) == value, (algo, task, name)

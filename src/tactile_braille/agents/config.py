@@ -464,6 +464,18 @@ class MRQConfig(AgentConfig):
             pixels along each axis, its edge repeated (MR.Q's augmentation; 0: none; images only).
     """
 
+    search_space: ClassVar[Space] = {
+        "gamma": Choice((0.9, 0.95, 0.99)),
+        "batch_size": Choice((64, 128, 256)),
+        "target_every": Choice((100, 250, 500)),
+        "value_horizon": Choice((1, 3, 5)),
+        "encoder_learning_rate": Range(3e-5, 3e-4, log=True),
+        "value_learning_rate": Range(1e-4, 1e-3, log=True),
+        "policy_learning_rate": Range(1e-4, 1e-3, log=True),
+        "dynamics_weight": Choice((0.1, 1.0)),
+        "reward_weight": Choice((0.1, 1.0)),
+    }
+
     gamma: float = 0.99
     batch_size: int = 256
     target_every: int = 250
