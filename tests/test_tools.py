@@ -217,3 +217,31 @@ def test_offline_gpu_sweep_tunes_with_workers_sharing_one_study_and_packs_the_se
         )
     assert "./final_6.log" in names and not any(name.startswith("./search_") for name in names)
     assert sixth["tuning"]["best"] == summary["best"] and sixth["budget"]["env_steps"] == 80
+
+
+@pytest.mark.slow
+def test_offline_gpu_sweep_tunes_one_of_our_agents_from_a_preset(env_datasets, tmp_path):
+    """`tune` with PRESET: `tactile-braille tune search|run` from the preset, two processes sharing the
+    study, then a fresh seed's run whose record carries the search; all of it in tuning.tgz."""
+    copy, out = _node_checkout(tmp_path)
+    dataset = env_datasets["tactile_braille/DiscreteArrows-v0"]
+    result = subprocess.run(
+        ["bash", str(copy / "tools" / SCRIPT.name), "tune", "300", "300", "DiscreteArrows-v0", "planner", "2",
+         "--dataset", str(dataset)],
+        capture_output=True, text=True, timeout=600,
+        env={**os.environ, "OUT": str(out), "DEVICE": "cpu", "JOBS": "2", "PRESET": "fast-tactile",
+             "EPOCHS": "1", "FINAL_EPOCHS": "1", "SEEDS": "5", "PYTHON": sys.executable,
+             "SITE": str(tmp_path / "site")},
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    name = "DiscreteArrows-v0__planner__fast-tactile"
+    with tarfile.open(out / "tuning.tgz") as packed:
+        names = set(packed.getnames())
+        summary = json.loads(packed.extractfile(f"runs/tune/{name}.json").read())
+        final = json.loads(
+            packed.extractfile("results/tuned/DiscreteArrows-v0__planner__tuned__5/result.json").read()
+        )
+    assert {f"runs/tune/{name}.db", "./search_0.log", "./search_1.log", "./final_5.log"} <= names
+    assert summary["trials"] == 2 and summary["preset"] == "fast-tactile" and summary["steps"] == 250
+    assert final["seed"] == 5 and final["tuning"]["best"] == summary["best"]
+    assert final["budget"]["env_steps"] == 250 and final["method"].startswith("tactile_braille planner")

@@ -32,6 +32,10 @@
 #       STEPS, if set, is the search's budget in place of the task's official one; FINAL_STEPS the final
 #       seeds' (a quick check: their rows are then ranked apart). Then $OUT/tuning.tgz: the study, its
 #       summary, the results files and each process's log.
+#       With PRESET set, ALGO is one of this project's agents, searched from that preset by
+#       `tactile-braille tune search|run TASK ALGO --preset PRESET` (its space: the agent's
+#       `search_space`); STEPS and FINAL_STEPS are then EPOCHS and FINAL_EPOCHS, the final runs' folders
+#       go under ROOT (default runs/tuned) and RESULTS defaults to results/tuned.
 #
 # SWEEP_COMMAND=sweep runs `tactile-braille sweep` instead of `benchmark` (a preset's variant: its
 # settings and --variant NAME among the arguments).
@@ -44,7 +48,7 @@ cd "$(dirname "$0")/.."
 STATE=${STATE:-/tmp/offline_gpu_sweep}
 SWEEP_COMMAND=${SWEEP_COMMAND:-benchmark}
 
-usage() { sed -n '2,38p' "$0" >&2; exit 2; }
+usage() { sed -n '2,42p' "$0" >&2; exit 2; }
 fail() { echo "$*" >&2; exit 2; }
 
 prepare() {
@@ -182,29 +186,43 @@ tune() {  # SEARCH_S FINAL_S TASK ALGO TRIALS [ARGS...]
     [ "$final" -gt 0 ] || fail "FINAL_S must be more than 0 seconds (the final seeds' limit)"
     shift 5
     setup
-    local study=${STUDY:-runs/tune} results=${RESULTS:-results/leaderboard/sb3-tuned} logs i seed
-    local -a steps=() final_steps=()
-    [ -z "${STEPS:-}" ] || steps=(--steps "$STEPS")
-    [ -z "${FINAL_STEPS:-}" ] || final_steps=(--steps "$FINAL_STEPS")
+    local study=${STUDY:-runs/tune} results logs i seed name
+    local -a steps=() final_steps=() search_command run_command
+    if [ -n "${PRESET:-}" ]; then  # one of this project's agents, from a preset
+        results=${RESULTS:-results/tuned}
+        name="${task}__${algo}__${PRESET}"
+        search_command=(-m tactile_braille.cli tune search "$task" "$algo" --preset "$PRESET" --threads 1)
+        run_command=(-m tactile_braille.cli tune run "$task" "$algo" --preset "$PRESET" --threads 1
+            --root "${ROOT:-runs/tuned}")
+        [ -z "${EPOCHS:-}" ] || steps=(--epochs "$EPOCHS")
+        [ -z "${FINAL_EPOCHS:-}" ] || final_steps=(--epochs "$FINAL_EPOCHS")
+    else  # Stable-Baselines3 or SB3-Contrib
+        results=${RESULTS:-results/leaderboard/sb3-tuned}
+        name="${task}__${algo}"
+        search_command=(-m tactile_braille.baselines.sb3 tune "$task" "$algo")
+        run_command=(-m tactile_braille.baselines.sb3 run "$task" "$algo")
+        [ -z "${STEPS:-}" ] || steps=(--steps "$STEPS")
+        [ -z "${FINAL_STEPS:-}" ] || final_steps=(--steps "$FINAL_STEPS")
+    fi
     logs=$(mktemp -d)
     local jobs=$((${JOBS:-14} < trials ? ${JOBS:-14} : trials))
     [ "$search" -gt 0 ] || jobs=0  # `timeout 0` would not stop a search: 0 means none
     for ((i = 0; i < jobs; i++)); do  # SIGINT: a stopped trial is marked failed, not left running
-        timeout --signal=INT --kill-after=20 "$search" "$PYTHON" -m tactile_braille.baselines.sb3 tune \
-            "$task" "$algo" --trials "$trials" --study "$study" --device "${DEVICE:-cuda}" "${steps[@]}" "$@" \
+        timeout --signal=INT --kill-after=20 "$search" "$PYTHON" "${search_command[@]}" \
+            --trials "$trials" --study "$study" --device "${DEVICE:-cuda}" "${steps[@]}" "$@" \
             > "$logs/search_$i.log" 2>&1 &
         sleep 2  # each takes its trial before the next counts them
     done
     wait || true
     for seed in ${SEEDS:-0 1 2 3 4}; do
-        timeout --signal=INT --kill-after=20 "$final" "$PYTHON" -m tactile_braille.baselines.sb3 run \
-            "$task" "$algo" --study "$study" --seeds "$seed" --into "$results" --device "${DEVICE:-cuda}" \
+        timeout --signal=INT --kill-after=20 "$final" "$PYTHON" "${run_command[@]}" \
+            --study "$study" --seeds "$seed" --into "$results" --device "${DEVICE:-cuda}" \
             "${final_steps[@]}" "$@" \
             > "$logs/final_$seed.log" 2>&1 &
     done
     wait || true
     mkdir -p "$results"
-    tar czf "$OUT/tuning.tgz" "$study/${task}__${algo}".* "$results" -C "$logs" .
+    tar czf "$OUT/tuning.tgz" "$study/$name".* "$results" -C "$logs" .
     tail -n 3 "$logs"/*.log
 }
 
