@@ -24,6 +24,7 @@ from replay_helpers import (
 from tactile_braille.agents import TrainConfig, train
 from tactile_braille.agents.config import MRQConfig
 from tactile_braille.agents.mrq import MRQAgent, TwoHot
+from tactile_braille.agents.presets import preset_config
 from tactile_braille.agents.replay import EpisodeReplayBuffer, SubTrajectories
 from tactile_braille.agents.report import load_run
 from tactile_braille.agents.run import read_progress
@@ -156,6 +157,15 @@ def test_mrq_refuses_the_replays_n_step_returns_and_shifts_it_makes_itself():
     with pytest.raises(ValueError, match=r"agent.image_shift\): replay.shift must be 0, got 2"):
         TrainConfig(algo="mrq", replay={"shift": 2})
     assert TrainConfig(algo="mrq").updates_per_step == 1
+
+
+def test_the_fast_presets_refuse_mrq_by_name():
+    for preset in ("fast", "fast-tactile"):
+        with pytest.raises(
+            ValueError, match=rf"--preset {preset} holds settings for .* not mrq: use --preset paper"
+        ):
+            preset_config(preset, "tactile_braille/DiscreteArrows-v0", "mrq")
+    assert preset_config("paper", "tactile_braille/DiscreteArrows-v0", "mrq").agent == MRQConfig()
 
 
 def test_the_two_hot_encoding_puts_each_reward_between_its_two_bins():

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tactile_braille.agents.config import TrainConfig, differences, replace_settings
-from tactile_braille.agents.registry import agent_spec
+from tactile_braille.agents.registry import PAPER_AGENTS, agent_spec
 from tactile_braille.envs.registry import task_of
 from tactile_braille.envs.tasks import Task
 
@@ -304,6 +304,11 @@ def preset_config(name: str, task: str, algo: str, **overrides: Any) -> TrainCon
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose one of {PRESETS}")
     agent_spec(algo)  # raises for an unknown name, listing the registered ones
+    if name.startswith("fast") and algo not in PAPER_AGENTS and algo != "planner":
+        raise ValueError(
+            f"--preset {name} holds settings for the paper's agents {PAPER_AGENTS} only, not {algo}: "
+            "use --preset paper (and agent.* settings of its own)"
+        )
     changes = paper_changes(task, algo)
     if name.startswith("fast"):  # fast keeps the noise it was made with, in the actions' [-1, 1] units
         changes.pop("agent", None)
