@@ -108,7 +108,7 @@ TASK_PRESETS: dict[str, TaskPresets] = {
             # the sensor is, and the actor, which acts on touch alone, learns from that judgement.
             "agent": {"critic_pose": True},
         },
-        planner_agent={"move": 0.9, "lost_value": 0.0, "outcome_memory": True},
+        planner_agent={"move": 0.9, "lost_value": 0.0, "outcome_memory": True, "test_gamma": 0.97},
     ),
 }  # fmt: skip
 """The presets' numbers for each registered braille task (:data:`~tactile_braille._tasks.REGISTERED_TASKS`),
@@ -265,14 +265,16 @@ def planner_changes(task: str) -> dict[str, Any]:
     with the move asked is none of its five actions). On the continuous arrows, in test episodes and
     typing, it presses only where the frame itself reads the goal at 0.8 or more (``press_reading``),
     and never on an episode's first frame (``first_press`` False). On the continuous alphabet its moves
-    are 18 mm (``move`` 0.9), shorter than nearly every key along a row. On the discrete arrows its
-    test episodes and typing plan with a discount of 0.7 (``test_gamma``; exploring, and on the
-    alphabets' longer paths, 0.9). On the discrete arrows and the continuous alphabet its test episodes
-    and typing plan on where each move already taken led (``outcome_memory``). On the discrete tasks its
-    backtracking weighs each state by how often it is occupied (``backtrack_prior``); on the discrete
-    tasks and the continuous alphabet a move into the generic *nothing* is worth none of that state's
-    value (``lost_value`` 0). Each was tuned on seeds 100-102; docs/notes/key-graph-planner.md and
-    docs/notes/key-graph-planner-continuous.md have the measurements behind each."""
+    are 18 mm (``move`` 0.9), shorter than nearly every key along a row. Its test episodes and typing
+    plan with a discount of their own (``test_gamma``; exploring keeps 0.9): 0.7 on the discrete
+    arrows, 0.97 on the continuous alphabet (its long paths, where a sure route to a far key must
+    outbid a likely press of the key beside it), 0.9 on the others. On the discrete arrows and the
+    continuous alphabet its test episodes and typing plan on where each move already taken led
+    (``outcome_memory``). On the discrete tasks its backtracking weighs each state by how often it is
+    occupied (``backtrack_prior``); on the discrete tasks and the continuous alphabet a move into the
+    generic *nothing* is worth none of that state's value (``lost_value`` 0). Each was tuned on seeds
+    100-102; docs/notes/key-graph-planner.md and docs/notes/key-graph-planner-continuous.md have the
+    measurements behind each."""
     spec, presets = task_presets(task)
     epochs = presets.fast_tactile_epochs if presets.planner_epochs is None else presets.planner_epochs
     changes: dict[str, Any] = {

@@ -225,14 +225,16 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
     return records
 
 
-def group(records: list[RunRecord]) -> dict[tuple[str, str, str], list[RunRecord]]:
-    """Records by (task, algo, variant), in the paper's order; runs of one group need distinct seeds."""
+def group(records: list[RunRecord], variant=None) -> dict[tuple[str, str, str], list[RunRecord]]:
+    """Records by (task, algo, variant), in the paper's order; runs of one group need distinct seeds.
+    ``variant``: a record's variant as the groups name it (default: :attr:`RunRecord.variant`)."""
     order = list(TASK_NAMES)
+    named = variant or (lambda record: record.variant)
     groups: dict[tuple[str, str, str], list[RunRecord]] = {}
     for record in sorted(
-        records, key=lambda r: (order.index(r.task) if r.task in order else 99, r.algo, r.variant, r.seed)
+        records, key=lambda r: (order.index(r.task) if r.task in order else 99, r.algo, named(r), r.seed)
     ):
-        members = groups.setdefault((record.task, record.algo, record.variant), [])
+        members = groups.setdefault((record.task, record.algo, named(record)), [])
         if any(other.seed == record.seed for other in members):
             raise ValueError(f"{record.path} repeats seed {record.seed} of {members[0].path}")
         members.append(record)

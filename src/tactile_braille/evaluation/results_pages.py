@@ -112,22 +112,28 @@ def is_presets_own(variant: str) -> bool:
 
 def split_groups(records: list[RunRecord], ablations: list[RunRecord] = ()) -> tuple[Groups, Groups]:
     """(The groups of ``records`` run with a preset's own settings, the others with ``ablations``'s), each
-    in the paper's order (:func:`~tactile_braille.evaluation.report.group`). An ablation's runs are never a
-    preset's own row: where their settings are the preset's, their group is named :data:`AS_ABLATION`,
-    after their epochs where those are not the preset's (``fast-tactile, fp32, 60 epochs, run as an
-    ablation``): the ablation is then the training's length."""
+    in the paper's order (:func:`~tactile_braille.evaluation.report.group`). A departing group is named
+    after its epochs too where those are not its preset's (``fast-tactile, fp32, agent.x=1, 100
+    epochs``), so that the same settings trained for other lengths are two groups. An ablation's runs
+    are never a preset's own row: where their settings are the preset's, their group is named
+    :data:`AS_ABLATION` (``fast-tactile, fp32, 60 epochs, run as an ablation``: the ablation is then
+    the training's length)."""
     own = group([r for r in records if is_presets_own(r.variant)])
-    departed = group([r for r in [*records, *ablations] if not is_presets_own(r.variant)])
-    for (task, algo, variant), members in group([r for r in ablations if is_presets_own(r.variant)]).items():
-        for record in members:
-            named = f"{variant}{_other_epochs(record)}, {AS_ABLATION}"
-            departed.setdefault((task, algo, named), []).append(record)
+
+    def named(record: RunRecord) -> str:
+        own_settings = f", {AS_ABLATION}" if is_presets_own(record.variant) else ""
+        return f"{record.variant}{_other_epochs(record)}{own_settings}"
+
+    departed = group([r for r in records if not is_presets_own(r.variant)] + list(ablations), variant=named)
     return own, dict(sorted(departed.items(), key=lambda item: (_task_index(item[0][0]), *item[0][1:])))
 
 
 def _other_epochs(record: RunRecord) -> str:
-    """``", 60 epochs"`` where a preset's run was set to train other epochs than its preset's, else ``""``."""
+    """``", 60 epochs"`` where a preset's run was set to train other epochs than its preset's, else ``""``
+    (also for a run of no preset)."""
     config = record.config
+    if config is None or config.preset not in PRESETS:
+        return ""
     preset = preset_config(config.preset, config.task, config.algo)
     return "" if config.epochs == preset.epochs else f", {config.epochs} epochs"
 
