@@ -424,6 +424,22 @@ def test_a_presets_own_rows_are_the_headline_and_the_rest_depart(records_tree):
     assert departure_text("paper, bf16") == "" and preset_of("fast-tactile, fp32, x=1") == "fast-tactile"
 
 
+def test_the_same_departure_trained_for_other_epochs_is_a_group_of_its_own(tmp_path):
+    from tactile_braille.evaluation.results_pages import split_groups
+
+    relabel = preset_config("paper", "tactile_braille/DiscreteArrows-v0", "dqn", precision="bf16",
+                            replay={"relabel": "all"})  # fmt: skip
+    runs = [write_record(tmp_path / "relabel" / "r_0", relabel, 0, [0.9, 1.0], 1.0, 245)]
+    longer = replace_settings(relabel, {"epochs": 40})
+    ablations = [write_record(tmp_path / "ablation-x" / "r_0", longer, 0, [0.5, 0.9], 0.9, 300)]
+    own, departed = split_groups(load_records(runs), load_records(ablations))  # seed 0 twice, no clash
+    assert not own
+    assert {key[2]: [r.path for r in records] for key, records in departed.items()} == {
+        "paper, bf16, replay.relabel=all": runs,
+        "paper, bf16, replay.relabel=all, 40 epochs": ablations,
+    }
+
+
 def test_the_results_pages_are_written_whole_and_again_byte_for_byte(records_tree, monkeypatch, capsys):
     from tactile_braille.evaluation.results_pages import main
 
