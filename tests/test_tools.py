@@ -166,20 +166,26 @@ def test_offline_gpu_sweep_runs_a_variant_through_sweep_and_packs_its_record(env
     assert "sweep exit status 0" in log
 
 
+def _tune(copy: Path, out: Path, *args: str, **env: str) -> None:
+    """The node's copy of the script's `tune ARGS` on the CPU (its wheels installed under the checkout's
+    parent), with ENV beside the node's own; it must succeed."""
+    result = subprocess.run(
+        ["bash", str(copy / "tools" / SCRIPT.name), "tune", *args],
+        capture_output=True, text=True, timeout=600,
+        env={**os.environ, "OUT": str(out), "DEVICE": "cpu", "PYTHON": sys.executable,
+             "SITE": str(copy.parent / "site"), **env},
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+
+
 @pytest.mark.slow
 def test_offline_gpu_sweep_tunes_with_workers_sharing_one_study_and_packs_the_search(env_datasets, tmp_path):
     """The `tune` verb end to end on the CPU: two processes share the SQLite study and stop at its
     trials (two, not one each more), then the final run of a fresh seed; all of it in tuning.tgz."""
     copy, out = _node_checkout(tmp_path)
     dataset = env_datasets["tactile_braille/DiscreteArrows-v0"]
-    result = subprocess.run(
-        ["bash", str(copy / "tools" / SCRIPT.name), "tune", "240", "240", "DiscreteArrows-v0", "dqn", "2",
-         "--dataset", str(dataset)],
-        capture_output=True, text=True, timeout=600,
-        env={**os.environ, "OUT": str(out), "DEVICE": "cpu", "JOBS": "2", "STEPS": "60", "SEEDS": "5",
-             "FINAL_STEPS": "80", "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
+    _tune(copy, out, "240", "240", "DiscreteArrows-v0", "dqn", "2", "--dataset", str(dataset),
+          JOBS="2", STEPS="60", SEEDS="5", FINAL_STEPS="80")  # fmt: skip
     with tarfile.open(out / "tuning.tgz") as packed:
         names = set(packed.getnames())
         summary = json.loads(packed.extractfile("runs/tune/DiscreteArrows-v0__dqn.json").read())
@@ -201,14 +207,8 @@ def test_offline_gpu_sweep_tunes_with_workers_sharing_one_study_and_packs_the_se
     (record / "DiscreteArrows-v0__dqn.json").write_text(json.dumps(summary))
     again = tmp_path / "again"
     again.mkdir()
-    result = subprocess.run(
-        ["bash", str(copy / "tools" / SCRIPT.name), "tune", "0", "240", "DiscreteArrows-v0", "dqn", "2",
-         "--dataset", str(dataset)],
-        capture_output=True, text=True, timeout=600,
-        env={**os.environ, "OUT": str(again), "DEVICE": "cpu", "STUDY": "record", "SEEDS": "6",
-             "FINAL_STEPS": "80", "PYTHON": sys.executable, "SITE": str(tmp_path / "site")},
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
+    _tune(copy, again, "0", "240", "DiscreteArrows-v0", "dqn", "2", "--dataset", str(dataset),
+          STUDY="record", SEEDS="6", FINAL_STEPS="80")  # fmt: skip
     assert not list(record.glob("*.db"))  # no new study beside the record
     with tarfile.open(again / "tuning.tgz") as packed:
         names = set(packed.getnames())
@@ -225,15 +225,8 @@ def test_offline_gpu_sweep_tunes_one_of_our_agents_from_a_preset(env_datasets, t
     study, then a fresh seed's run whose record carries the search; all of it in tuning.tgz."""
     copy, out = _node_checkout(tmp_path)
     dataset = env_datasets["tactile_braille/DiscreteArrows-v0"]
-    result = subprocess.run(
-        ["bash", str(copy / "tools" / SCRIPT.name), "tune", "300", "300", "DiscreteArrows-v0", "planner", "2",
-         "--dataset", str(dataset)],
-        capture_output=True, text=True, timeout=600,
-        env={**os.environ, "OUT": str(out), "DEVICE": "cpu", "JOBS": "2", "PRESET": "fast-tactile",
-             "EPOCHS": "1", "FINAL_EPOCHS": "1", "SEEDS": "5", "PYTHON": sys.executable,
-             "SITE": str(tmp_path / "site")},
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
+    _tune(copy, out, "300", "300", "DiscreteArrows-v0", "planner", "2", "--dataset", str(dataset),
+          JOBS="2", PRESET="fast-tactile", EPOCHS="1", FINAL_EPOCHS="1", SEEDS="5")  # fmt: skip
     name = "DiscreteArrows-v0__planner__fast-tactile"
     with tarfile.open(out / "tuning.tgz") as packed:
         names = set(packed.getnames())
