@@ -21,6 +21,7 @@ import json
 import math
 import re
 import textwrap
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -225,7 +226,9 @@ def load_records(run_dirs, evaluate_missing: bool = True) -> list[RunRecord]:
     return records
 
 
-def group(records: list[RunRecord], variant=None) -> dict[tuple[str, str, str], list[RunRecord]]:
+def group(
+    records: list[RunRecord], variant: Callable[[RunRecord], str] | None = None
+) -> dict[tuple[str, str, str], list[RunRecord]]:
     """Records by (task, algo, variant), in the paper's order; runs of one group need distinct seeds.
     ``variant``: a record's variant as the groups name it (default: :attr:`RunRecord.variant`)."""
     order = list(TASK_NAMES)
