@@ -106,7 +106,7 @@ def test_the_untuned_settings_must_lie_in_the_space():
         check_untuned(space, {"gamma": 0.99, "learning_rate": 1e-2})
     with pytest.raises(ValueError, match="learning_rate: none given"):
         check_untuned(space, {"gamma": 0.9})
-    for task in ("DiscreteArrows-v0", "DiscreteAlphabet-v0", "ContinuousArrows-v0", "ContinuousAlphabet-v0"):
+    for task in (registered.env_id for registered in REGISTERED_TASKS):
         check_untuned(tuning.search_space("planner"), tuning.untuned(task, "planner", "fast-tactile"))
         check_untuned(tuning.search_space("mrq"), tuning.untuned(task, "mrq", "paper"))
 
